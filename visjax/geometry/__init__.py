@@ -1,0 +1,34 @@
+"""Camera model, SO(3), homography estimation and decomposition: pure JAX functions."""
+
+from ._camera import (
+    extended_intrinsics as extended_intrinsics,
+    intrinsic_matrix as intrinsic_matrix,
+    normalized_to_pixel as normalized_to_pixel,
+    pixel_to_normalized as pixel_to_normalized,
+    project as project,
+    to_homogeneous as to_homogeneous,
+)
+from ._decomposition import (
+    decompose_homography as decompose_homography,
+    decompose_homography_known_normal as decompose_homography_known_normal,
+    select_solution as select_solution,
+)
+from ._homography import (
+    alpha_g33 as alpha_g33,
+    euclidean_homography as euclidean_homography,
+    find_homography as find_homography,
+    projective_homography as projective_homography,
+)
+from ._reconstruction import (
+    Reconstruction as Reconstruction,
+    euclidean_reconstruction as euclidean_reconstruction,
+)
+from ._so3 import (
+    L_omega as L_omega,
+    L_omega_inv as L_omega_inv,
+    sinc as sinc,
+    skew as skew,
+    so3_exp as so3_exp,
+    so3_log as so3_log,
+    vee as vee,
+)

@@ -1,0 +1,149 @@
+"""Pinhole camera: the intrinsic matrix, pixel <-> normalized coordinates, projection.
+
+Source: seed 000 (Chitrakaran et al.), eqs. (10), (14), (15) and (22).
+
+Convention: pixel coordinates are $p = [u, v]$ with $[u, v, 1]^T = A\\,[x, y, 1]^T$ (eq. (15)),
+where $m = [x, y, 1]^T = \\bar m / z$ are the normalized coordinates of a point $\\bar m$
+expressed in the camera frame (eq. (10)); $z$ is the depth along the optical axis.
+Arrays of points have the point index first: shape (n, 2) or (n, 3).
+"""
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from .._results import RESULTS, raise_or_keep
+from ._util import as_float, check_shape
+
+
+def intrinsic_matrix(
+    fx: float | ArrayLike,
+    fy: float | ArrayLike,
+    cx: float | ArrayLike,
+    cy: float | ArrayLike,
+    skew: float | ArrayLike = 0.0,
+) -> Float[Array, "3 3"]:
+    """The intrinsic calibration matrix $A$ of eq. (15).
+
+    **Arguments:**
+
+    - `fx`, `fy`: focal lengths in pixels.
+    - `cx`, `cy`: the principal point $(u_0, v_0)$ in pixels.
+    - `skew`: the skew entry $A_{12}$ (0 for rectangular pixels).
+
+    **Returns:** $A = [[f_x, s, c_x], [0, f_y, c_y], [0, 0, 1]]$.
+    """
+    fx, fy, cx, cy, skew = (as_float(v) for v in (fx, fy, cx, cy, skew))
+    dtype = jnp.result_type(fx, fy, cx, cy, skew)
+    z = jnp.zeros((), dtype)
+    o = jnp.ones((), dtype)
+    return jnp.stack(
+        [jnp.stack([fx, skew, cx]), jnp.stack([z, fy, cy]), jnp.stack([z, z, o])]
+    ).astype(dtype)
+
+
+def _check_A(A):
+    A = as_float(A)
+    check_shape(A, (3, 3), "A")
+    return A
+
+
+def _check_last(x, size: int, name: str):
+    x = as_float(x)
+    if x.ndim < 1 or x.shape[-1] != size:
+        raise ValueError(f"`{name}` must have shape (..., {size}); got shape {tuple(x.shape)}.")
+    return x
+
+
+def to_homogeneous(x: Float[ArrayLike, "... 2"]) -> Float[Array, "... 3"]:
+    """Append a 1 to the last axis: $[u, v] \\mapsto [u, v, 1]$ (eq. (14))."""
+    x = _check_last(x, 2, "x")
+    return jnp.concatenate([x, jnp.ones(x.shape[:-1] + (1,), x.dtype)], axis=-1)
+
+
+def pixel_to_normalized(
+    p: Float[ArrayLike, "... 2"], A: Float[ArrayLike, "3 3"]
+) -> Float[Array, "... 2"]:
+    """Normalized coordinates $[x, y]$ from pixels, $m = A^{-1} p$ (inverse of eq. (15)).
+
+    **Arguments:**
+
+    - `p`: pixel coordinates, shape (..., 2).
+    - `A`: the intrinsic matrix.
+
+    **Returns:** $[x, y]$ of $m = [x, y, 1]^T$, shape (..., 2).
+    """
+    p = _check_last(p, 2, "p")
+    A = _check_A(A)
+    fx, s, cx = A[0, 0], A[0, 1], A[0, 2]
+    fy, cy = A[1, 1], A[1, 2]
+    y = (p[..., 1] - cy) / fy
+    x = (p[..., 0] - cx - s * y) / fx
+    return jnp.stack([x, y], axis=-1)
+
+
+def normalized_to_pixel(
+    m: Float[ArrayLike, "... 2"], A: Float[ArrayLike, "3 3"]
+) -> Float[Array, "... 2"]:
+    """Pixels from normalized coordinates, $p = A m$ (eq. (15)).
+
+    **Arguments:**
+
+    - `m`: normalized coordinates $[x, y]$, shape (..., 2).
+    - `A`: the intrinsic matrix.
+
+    **Returns:** pixel coordinates $[u, v]$, shape (..., 2).
+    """
+    m = _check_last(m, 2, "m")
+    A = _check_A(A)
+    u = A[0, 0] * m[..., 0] + A[0, 1] * m[..., 1] + A[0, 2]
+    v = A[1, 1] * m[..., 1] + A[1, 2]
+    return jnp.stack([u, v], axis=-1)
+
+
+def project(
+    points: Float[ArrayLike, "... 3"],
+    A: Float[ArrayLike, "3 3"],
+    *,
+    throw: bool = True,
+) -> Float[Array, "... 2"]:
+    """Project 3D points given in the camera frame to pixels (eqs. (10) and (15)).
+
+    **Arguments:**
+
+    - `points`: $\\bar m = [x, y, z]$ in the camera frame, shape (..., 3).
+    - `A`: the intrinsic matrix.
+    - `throw`: if `True` (default), a point with depth $z \\le 0$ raises at run time
+        ("point is behind the camera"). With `False` the pixels are returned together with
+        a `RESULTS` item: `project(..., throw=False) -> (pixels, result)`.
+
+    **Returns:** pixel coordinates, shape (..., 2).
+    """
+    points = _check_last(points, 3, "points")
+    A = _check_A(A)
+    z = points[..., 2]
+    bad_depth = jnp.any(z <= 0.0)
+    nonfinite = ~jnp.all(jnp.isfinite(points))
+    result = RESULTS.where(
+        nonfinite,
+        RESULTS.nonfinite_input,
+        RESULTS.where(bad_depth, RESULTS.behind_camera, RESULTS.successful),
+    )
+    # Keep the division finite for points we are about to report.
+    z_safe = jnp.where(z > 0.0, z, 1.0)
+    m = points[..., :2] / z_safe[..., None]
+    pixels = normalized_to_pixel(m, A)
+    if throw:
+        return raise_or_keep(result, pixels, True)
+    return pixels, result
+
+
+def extended_intrinsics(A: Float[ArrayLike, "3 3"]) -> Float[Array, "3 3"]:
+    """The matrix $A_e$ of seed 000 eq. (22): $A$ with the principal point removed.
+
+    $A_e = A - [[0, 0, u_0], [0, 0, v_0], [0, 0, 0]]$, which maps the rate of the
+    normalized coordinates to the rate of the extended image coordinates
+    $p_e = [u, v, \\ln z]$ in eq. (21).
+    """
+    A = _check_A(A)
+    mask = jnp.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]], A.dtype)
+    return A - mask * A

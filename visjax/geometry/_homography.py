@@ -1,0 +1,234 @@
+"""Homography from point correspondences: normalized DLT and the products alpha_i g33.
+
+Source: seed 000 (Chitrakaran et al.), section 3, eqs. (12), (16) and (17).
+
+Convention: the projective homography $G$ maps reference pixels to current pixels,
+$p_i = \\alpha_i G p_i^*$ (eq. (16)), with $p = [u, v, 1]^T$ and $\\alpha_i = z_i^*/z_i$.
+`find_homography` returns $G_n = G / g_{33}$ (eq. (17)), the same normalisation as
+`cv2.findHomography`. The Euclidean homography acts on normalized coordinates,
+$H = A^{-1} G A$.
+"""
+
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+from jaxtyping import Array, ArrayLike, Float
+
+from .._results import RESULTS, raise_or_keep
+from ._camera import to_homogeneous
+from ._util import as_float, check_points, check_shape
+
+
+def _rcond_tol(dtype) -> float:
+    # Reject designs whose reciprocal condition number is below this. The relative error
+    # of the solution is about eps / rcond, so this caps it near sqrt(eps) (1.5e-8 in
+    # float64, 3e-4 in float32): beyond it, near-collinear points give garbage.
+    return float(jnp.finfo(dtype).eps) ** 0.5
+
+
+def _normalising_transform(p):
+    """Hartley's similarity: centroid to the origin, RMS distance to sqrt(2)."""
+    c = jnp.mean(p, axis=0)
+    d = p - c
+    ms = jnp.mean(jnp.sum(d**2, axis=1))
+    ms_safe = jnp.where(ms > 0.0, ms, 1.0)
+    s = jnp.sqrt(2.0 / ms_safe)
+    return c, s, d * s
+
+
+def _similarity(s, c):
+    """$T$ with $T [u, v, 1]^T = [s (u - c_u), s (v - c_v), 1]^T$."""
+    z = jnp.zeros_like(s)
+    o = jnp.ones_like(s)
+    return jnp.stack(
+        [jnp.stack([s, z, -s * c[0]]), jnp.stack([z, s, -s * c[1]]), jnp.stack([z, z, o])]
+    )
+
+
+def _similarity_inv(s, c):
+    """The inverse of `_similarity(s, c)`."""
+    z = jnp.zeros_like(s)
+    o = jnp.ones_like(s)
+    return jnp.stack(
+        [jnp.stack([1.0 / s, z, c[0]]), jnp.stack([z, 1.0 / s, c[1]]), jnp.stack([z, z, o])]
+    )
+
+
+def _min_triangle_area(q):
+    """The smallest of the four triangle areas of four 2D points."""
+    tri = jnp.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
+    a, b, c = q[tri[:, 0]], q[tri[:, 1]], q[tri[:, 2]]
+    ab, ac = b - a, c - a
+    return 0.5 * jnp.min(jnp.abs(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0]))
+
+
+def _design(q_ref, q_cur):
+    """The 2n x 8 inhomogeneous DLT system $M h = b$ for $\\hat g_{33} = 1$.
+
+    Eq. (17) for one point gives three equations in $G_n$ and $\\alpha_i g_{33}$; the third,
+    $\\alpha_i g_{33} = 1 / (G_n p_i^*)_3$, eliminates the depth product from the first two.
+    """
+    x0, y0 = q_ref[:, 0], q_ref[:, 1]
+    x1, y1 = q_cur[:, 0], q_cur[:, 1]
+    one = jnp.ones_like(x0)
+    zero = jnp.zeros_like(x0)
+    rows_u = jnp.stack([x0, y0, one, zero, zero, zero, -x1 * x0, -x1 * y0], axis=1)
+    rows_v = jnp.stack([zero, zero, zero, x0, y0, one, -y1 * x0, -y1 * y0], axis=1)
+    M = jnp.concatenate([rows_u, rows_v], axis=0)
+    b = jnp.concatenate([x1, y1], axis=0)
+    return M, b
+
+
+def _dlt(p_ref, p_cur):
+    """Normalized DLT. Returns `(G_n, result)`; `G_n` is finite whatever the input."""
+    dtype = jnp.result_type(p_ref, p_cur)
+    n = p_ref.shape[0]
+    nonfinite = ~(jnp.all(jnp.isfinite(p_ref)) & jnp.all(jnp.isfinite(p_cur)))
+    p_ref = jnp.where(nonfinite, jnp.zeros_like(p_ref), p_ref)
+    p_cur = jnp.where(nonfinite, jnp.zeros_like(p_cur), p_cur)
+
+    c_ref, s_ref, q_ref = _normalising_transform(p_ref)
+    c_cur, s_cur, q_cur = _normalising_transform(p_cur)
+    M, b = _design(q_ref, q_cur)
+
+    tol = _rcond_tol(dtype)
+    if n == 4:
+        # Exactly determined: a homography exists and is unique iff no three of the four
+        # points are collinear (or coincident) in either image. Check the four triangle
+        # areas in the normalized coordinates (RMS radius sqrt(2), so a good quad has areas
+        # of order 1); cheaper and sharper than a condition number.
+        degenerate = _min_triangle_area(q_ref) < tol
+        degenerate = degenerate | (_min_triangle_area(q_cur) < tol)
+        M_safe = jnp.where(degenerate | nonfinite, jnp.eye(8, dtype=dtype), M)
+        h = jnp.linalg.solve(M_safe, b)
+    else:
+        # Over-determined: degeneracy from the conditioning of the normalized design (a
+        # predicate only: no gradient flows through the singular values). Least squares by
+        # QR: unlike an SVD or eigh of M^T M, its derivative exists when singular values
+        # repeat (a noise-free symmetric target, for instance).
+        sv = jnp.linalg.svd(jax.lax.stop_gradient(M), compute_uv=False)
+        degenerate = ~(sv[-1] > tol * sv[0])
+        M_dummy = jnp.concatenate([jnp.eye(8, dtype=dtype), jnp.zeros((2 * n - 8, 8), dtype)])
+        M_safe = jnp.where(degenerate | nonfinite, M_dummy, M)
+        Q, Rq = jnp.linalg.qr(M_safe)
+        h = jsl.solve_triangular(Rq, Q.T @ b, lower=False)
+    G_hat = jnp.concatenate([h, jnp.ones((1,), dtype)]).reshape(3, 3)
+    # Points collinear in one image only can still give a solvable system, but its
+    # solution is a singular G: no homography maps them.
+    G_hat_ng = jax.lax.stop_gradient(G_hat)
+    degenerate = degenerate | ~(
+        jnp.abs(jnp.linalg.det(G_hat_ng)) > tol * jnp.sum(G_hat_ng**2) ** 1.5
+    )
+
+    # Undo the normalisations: G = T_cur^{-1} G_hat T_ref.
+    G = _similarity_inv(s_cur, c_cur) @ G_hat @ _similarity(s_ref, c_ref)
+
+    bad = degenerate | nonfinite
+    G = jnp.where(bad, jnp.eye(3, dtype=dtype), G)
+    g33 = G[2, 2]
+    g33_zero = ~(jnp.abs(g33) > 100.0 * jnp.finfo(dtype).eps * jnp.linalg.norm(G))
+    g33_safe = jnp.where(g33_zero, 1.0, g33)
+    G_n = (G / g33_safe).at[2, 2].set(1.0)  # exactly 1, not 1 - ulp
+
+    result = RESULTS.where(
+        nonfinite,
+        RESULTS.nonfinite_input,
+        RESULTS.where(
+            bad,
+            RESULTS.degenerate_points,
+            RESULTS.where(g33_zero, RESULTS.g33_zero, RESULTS.successful),
+        ),
+    )
+    return G_n, result
+
+
+def _check_pair(p_ref, p_cur):
+    p_ref = check_points(p_ref, "p_ref")
+    p_cur = check_points(p_cur, "p_cur")
+    if p_ref.shape != p_cur.shape:
+        raise ValueError(
+            "`p_ref` and `p_cur` must hold the same points: got shapes "
+            f"{tuple(p_ref.shape)} and {tuple(p_cur.shape)}."
+        )
+    dtype = jnp.result_type(p_ref, p_cur)
+    return p_ref.astype(dtype), p_cur.astype(dtype)
+
+
+def find_homography(
+    p_ref: Float[ArrayLike, "n 2"],
+    p_cur: Float[ArrayLike, "n 2"],
+    *,
+    throw: bool = True,
+):
+    """The normalized projective homography $G_n$ with $p_i \\sim G_n p_i^*$ (eq. (17)).
+
+    A normalized (Hartley) DLT: both point sets are moved to their centroid and scaled to an
+    RMS distance of $\\sqrt 2$, the linear system of eq. (17) with $g_{33} = 1$ is solved
+    (exactly for 4 points, in the least-squares sense for more), and the normalisation is
+    undone.
+
+    Convention: `p_cur ~ G p_ref`, and `G[2, 2] == 1`, as `cv2.findHomography(p_ref, p_cur, 0)`
+    returns for exact correspondences.
+
+    **Arguments:**
+
+    - `p_ref`: reference pixels $p_i^*$, shape (n, 2), n >= 4.
+    - `p_cur`: current pixels $p_i$, shape (n, 2).
+    - `throw`: if `True` (default), collinear or coincident points, non-finite pixels or a
+        vanishing $g_{33}$ raise at run time. With `False`, returns `(G_n, result)` with a
+        `RESULTS` item instead (and a finite placeholder `G_n` on failure).
+
+    **Returns:** $G_n$, shape (3, 3).
+    """
+    p_ref, p_cur = _check_pair(p_ref, p_cur)
+    G_n, result = _dlt(p_ref, p_cur)
+    if throw:
+        return raise_or_keep(result, G_n, True)
+    return G_n, result
+
+
+def alpha_g33(G_n: Float[ArrayLike, "3 3"], p_ref: Float[ArrayLike, "n 2"]) -> Float[Array, " n"]:
+    """The products $\\alpha_i g_{33}$ of eq. (17), from its third row.
+
+    $p_i = \\alpha_i g_{33} G_n p_i^*$ and $p_i$ has third entry 1, so
+    $\\alpha_i g_{33} = 1 / (G_n p_i^*)_3$.
+
+    **Arguments:**
+
+    - `G_n`: the normalized projective homography.
+    - `p_ref`: reference pixels $p_i^*$, shape (n, 2).
+
+    **Returns:** $\\alpha_i g_{33}$ for each point, shape (n,). A point whose image lies at
+    infinity gets `inf`; `euclidean_reconstruction` reports it as behind the camera.
+    """
+    G_n = as_float(G_n)
+    check_shape(G_n, (3, 3), "G_n")
+    p_ref = check_points(p_ref, "p_ref", min_points=1)
+    w = to_homogeneous(p_ref) @ G_n[2]
+    return 1.0 / w
+
+
+def euclidean_homography(
+    G: Float[ArrayLike, "3 3"], A: Float[ArrayLike, "3 3"]
+) -> Float[Array, "3 3"]:
+    """The Euclidean homography $H = A^{-1} G A$ from the projective one (eq. (16)).
+
+    Convention: the scale of `G` carries over: with $G_n = G/g_{33}$ this returns
+    $H / g_{33}$.
+    """
+    G = as_float(G)
+    A = as_float(A)
+    check_shape(G, (3, 3), "G")
+    check_shape(A, (3, 3), "A")
+    return jnp.linalg.solve(A, G @ A)
+
+
+def projective_homography(
+    H: Float[ArrayLike, "3 3"], A: Float[ArrayLike, "3 3"]
+) -> Float[Array, "3 3"]:
+    """The projective homography $G = A H A^{-1}$ of eq. (16)."""
+    H = as_float(H)
+    A = as_float(A)
+    check_shape(H, (3, 3), "H")
+    check_shape(A, (3, 3), "A")
+    return A @ jnp.linalg.solve(A.T, H.T).T

@@ -1,0 +1,199 @@
+"""SO(3): skew matrices, the exponential and logarithm (angle-axis), `sinc`, and `L_omega`.
+
+Every function here is written for one instance (a 3-vector or a 3x3 matrix) and batched
+with `jax.vmap`. Every singular point (angle 0 for all of them, angle pi for the
+logarithm) has a Taylor branch chosen with the double-`where` pattern, so that neither the
+value nor the gradient is NaN there.
+
+Source: Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity with
+a fixed camera* (seed 000), eqs. (24)-(31) and (A.3).
+"""
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._util import as_float, check_shape
+
+
+def _small(dtype) -> float:
+    # Taylor branches are used below this squared angle. With three terms kept, the
+    # truncation error is O(theta^6), below machine precision for theta^2 < eps^(1/2).
+    return float(jnp.finfo(dtype).eps) ** 0.5
+
+
+def skew(v: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
+    """The skew-symmetric matrix $[v]_\\times$, with $[v]_\\times w = v \\times w$.
+
+    **Arguments:**
+
+    - `v`: a 3-vector.
+
+    **Returns:** the 3x3 matrix $[v]_\\times$ (seed 000, notation of eq. (27)).
+    """
+    v = as_float(v)
+    check_shape(v, (3,), "v")
+    z = jnp.zeros((), v.dtype)
+    return jnp.stack(
+        [
+            jnp.stack([z, -v[2], v[1]]),
+            jnp.stack([v[2], z, -v[0]]),
+            jnp.stack([-v[1], v[0], z]),
+        ]
+    )
+
+
+def vee(S: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
+    """The inverse of `skew`: the vector of the skew-symmetric part of `S`."""
+    S = as_float(S)
+    check_shape(S, (3, 3), "S")
+    return 0.5 * jnp.stack([S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1]])
+
+
+def sinc(x: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
+    """The unnormalised sinc, $\\mathrm{sinc}(x) = \\sin(x) / x$ (seed 000, below eq. (27)).
+
+    Convention: unnormalised (unlike `numpy.sinc`, which is $\\sin(\\pi x)/(\\pi x)$);
+    $\\mathrm{sinc}(0) = 1$ with a finite gradient there.
+    """
+    x = as_float(x)
+    x2 = x * x
+    small = x2 < _small(x.dtype)
+    x_safe = jnp.where(small, jnp.ones_like(x), x)
+    taylor = 1.0 - x2 / 6.0 + x2 * x2 / 120.0
+    return jnp.where(small, taylor, jnp.sin(x_safe) / x_safe)
+
+
+def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
+    """The exponential map from a rotation vector $\\theta u$ to a rotation matrix.
+
+    Implements the Rodrigues form of seed 000 eq. (A.3),
+    $R = I_3 + \\sin\\theta [u]_\\times + 2 \\sin^2(\\theta/2) [u]_\\times^2$,
+    written in $\\omega = \\theta u$ so that it is smooth at $\\theta = 0$.
+
+    **Arguments:**
+
+    - `omega`: the rotation vector $\\theta u$ (radians).
+
+    **Returns:** $R \\in SO(3)$.
+    """
+    omega = as_float(omega)
+    check_shape(omega, (3,), "omega")
+    t2 = jnp.sum(omega**2)
+    small = t2 < _small(omega.dtype)
+    t2_safe = jnp.where(small, jnp.ones_like(t2), t2)
+    t = jnp.sqrt(t2_safe)
+    a = jnp.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, jnp.sin(t) / t)
+    b = jnp.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
+    W = skew(omega)
+    return jnp.eye(3, dtype=omega.dtype) + a * W + b * (W @ W)
+
+
+def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
+    """The logarithm of a rotation matrix as a rotation vector $e_\\omega = u\\theta$.
+
+    Implements seed 000 eqs. (24) and (28): $\\theta = \\cos^{-1}((\\mathrm{tr} R - 1)/2)$,
+    $[u]_\\times = (R - R^T) / (2 \\sin\\theta)$, with $0 \\le \\theta \\le \\pi$ (eq. (29)).
+
+    Convention: the angle is computed as `atan2(|vee(R - R^T)|/2, (tr R - 1)/2)`, which is
+    accurate at every angle (the `arccos` of eq. (28) loses half the digits near 0 and pi).
+    Near $\\theta = \\pi$ the axis is read from the symmetric part
+    $(R + R^T)/2 - \\cos\\theta\\, I = (1 - \\cos\\theta)\\, u u^T$ and its sign from the
+    skew part, since eq. (28) divides by $\\sin\\theta \\to 0$ there. At exactly
+    $\\theta = \\pi$ both $u\\pi$ and $-u\\pi$ are valid; one is returned.
+
+    **Arguments:**
+
+    - `R`: a rotation matrix.
+
+    **Returns:** the rotation vector $u\\theta$ with $\\|u\\theta\\| \\in [0, \\pi]$.
+    """
+    R = as_float(R)
+    check_shape(R, (3, 3), "R")
+    dtype = R.dtype
+    w = vee(R)  # = sin(theta) u
+    c = jnp.clip(0.5 * (jnp.trace(R) - 1.0), -1.0, 1.0)  # = cos(theta)
+    s2 = jnp.sum(w**2)  # = sin^2(theta)
+
+    # Branch 1 (cos >= 0, theta <= pi/2): theta u = w * theta / sin(theta), where
+    # theta / sin(theta) = asin(s)/s = 1 + s^2/6 + 3 s^4/40 + ... for small s = sin(theta).
+    near_zero = s2 < _small(dtype)
+    s2_safe = jnp.where(near_zero, jnp.ones_like(s2), s2)
+    s_safe = jnp.sqrt(s2_safe)
+    factor = jnp.where(
+        near_zero, 1.0 + s2 / 6.0 + 3.0 * s2**2 / 40.0, jnp.arctan2(s_safe, c) / s_safe
+    )
+    small_branch = w * factor
+
+    # Branch 2 (cos < 0): axis from the symmetric part, sign from the skew part.
+    use_large = c < 0.0
+    R_safe = jnp.where(use_large, R, jnp.diag(jnp.array([1.0, -1.0, -1.0], dtype)))
+    c_safe = jnp.where(use_large, c, -1.0)
+    w_safe = vee(R_safe)
+    B = 0.5 * (R_safe + R_safe.T) - c_safe * jnp.eye(3, dtype=dtype)  # (1 - c) u u^T
+    k = jnp.argmax(jnp.diag(B))
+    col = B[:, k]
+    u = col / jnp.sqrt(B[k, k] * (1.0 - c_safe))
+    u = jnp.where(jnp.dot(u, w_safe) >= 0.0, u, -u)
+    sw2 = jnp.sum(w_safe**2)
+    sw = jnp.where(sw2 > 0.0, jnp.sqrt(jnp.where(sw2 > 0.0, sw2, 1.0)), 0.0)
+    theta_large = jnp.arctan2(sw, c_safe)
+    large_branch = theta_large * u
+
+    return jnp.where(use_large, large_branch, small_branch)
+
+
+def _L_omega_coefficient(t2):
+    # (1 - sinc(theta) / sinc^2(theta/2)) / theta^2 of eq. (27), and its Taylor series
+    # 1/12 + theta^2/720 + theta^4/30240 at theta -> 0.
+    small = t2 < _small(t2.dtype)
+    t2_safe = jnp.where(small, jnp.ones_like(t2), t2)
+    t = jnp.sqrt(t2_safe)
+    exact = (1.0 - sinc(t) / sinc(0.5 * t) ** 2) / t2_safe
+    return jnp.where(small, 1.0 / 12.0 + t2 / 720.0 + t2**2 / 30240.0, exact)
+
+
+def L_omega(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
+    """The rotational Jacobian $L_\\omega$ with $\\dot e_\\omega = L_\\omega \\omega_e$.
+
+    Implements seed 000 eq. (27),
+    $L_\\omega = I_3 - \\frac{\\theta}{2}[u]_\\times
+    + \\left(1 - \\frac{\\mathrm{sinc}\\theta}{\\mathrm{sinc}^2(\\theta/2)}\\right)[u]_\\times^2$,
+    written in $e_\\omega = u\\theta$ so that it is smooth (value and gradient) at
+    $\\theta = 0$, where $L_\\omega = I_3$.
+
+    Convention: $\\omega_e$ is the angular velocity in the fixed frame,
+    $[\\omega_e]_\\times = \\dot{\\bar R} \\bar R^T$ (eq. (A.2)), and $e_\\omega$ is
+    `so3_log(R_bar)`. Its determinant is $1/\\mathrm{sinc}^2(\\theta/2)$; eq. (31) of the
+    paper prints $1/\\sin^2(\\theta/2)$, which cannot hold at $\\theta \\to 0$ where
+    $L_\\omega \\to I_3$. Either way it is singular only at multiples of $2\\pi$.
+
+    **Arguments:**
+
+    - `e_omega`: the rotation vector $u\\theta$ of eq. (24).
+
+    **Returns:** the 3x3 matrix $L_\\omega$.
+    """
+    e_omega = as_float(e_omega)
+    check_shape(e_omega, (3,), "e_omega")
+    W = skew(e_omega)
+    c = _L_omega_coefficient(jnp.sum(e_omega**2))
+    return jnp.eye(3, dtype=e_omega.dtype) - 0.5 * W + c * (W @ W)
+
+
+def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
+    """The inverse of `L_omega`, so that $\\omega_e = L_\\omega^{-1} \\dot e_\\omega$ (eq. (A.14)).
+
+    Closed form (the left Jacobian of SO(3)):
+    $L_\\omega^{-1} = I_3 + \\frac{1 - \\cos\\theta}{\\theta^2}[e_\\omega]_\\times
+    + \\frac{\\theta - \\sin\\theta}{\\theta^3}[e_\\omega]_\\times^2$, with Taylor branches at 0.
+    """
+    e_omega = as_float(e_omega)
+    check_shape(e_omega, (3,), "e_omega")
+    t2 = jnp.sum(e_omega**2)
+    small = t2 < _small(e_omega.dtype)
+    t2_safe = jnp.where(small, jnp.ones_like(t2), t2)
+    t = jnp.sqrt(t2_safe)
+    b = jnp.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
+    c = jnp.where(small, 1.0 / 6.0 - t2 / 120.0 + t2**2 / 5040.0, (t - jnp.sin(t)) / (t2_safe * t))
+    W = skew(e_omega)
+    return jnp.eye(3, dtype=e_omega.dtype) + b * W + c * (W @ W)

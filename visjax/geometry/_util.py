@@ -1,0 +1,40 @@
+"""Input checks shared by the geometry functions (run before tracing, on static shapes)."""
+
+import jax.numpy as jnp
+
+
+def as_float(x):
+    """`x` as a JAX array of a floating dtype (integers promote to the default float)."""
+    x = jnp.asarray(x)
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.result_type(float))
+    return x
+
+
+def check_shape(x, shape, name: str) -> None:
+    """Raise `ValueError` unless `x.shape == shape` (`None` entries match any size)."""
+    ok = x.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, x.shape))
+    if not ok:
+        want = str(tuple("n" if s is None else s for s in shape)).replace("'", "")
+        raise ValueError(f"`{name}` must have shape {want}; got shape {tuple(x.shape)}.")
+
+
+def check_points(p, name: str, min_points: int = 4):
+    """`p` as a float array of shape (n, 2) with n >= `min_points`, else `ValueError`."""
+    p = as_float(p)
+    if p.ndim != 2 or p.shape[-1] != 2:
+        raise ValueError(
+            f"`{name}` must be an array of pixel coordinates of shape (n, 2); "
+            f"got shape {tuple(p.shape)}."
+        )
+    if p.shape[0] < min_points:
+        raise ValueError(
+            f"`{name}` has {p.shape[0]} points; at least {min_points} are needed "
+            "(a homography has 8 degrees of freedom, two equations per point)."
+        )
+    return p
+
+
+def common_dtype(*xs):
+    """The floating dtype the arguments promote to."""
+    return jnp.result_type(*xs)
