@@ -27,6 +27,8 @@ class RESULTS(eqx.Enumeration):
     no_physical_solution = (
         "No homography decomposition places the reference points in front of the camera."
     )
+    singular_jacobian = "The kinematics Jacobian J (seed 000, eq. (33)) is singular or not finite."
+    nonfinite_state = "The estimator state became non-finite (NaN or inf)."
 
 
 def raise_or_keep(result, x, throw: bool):

@@ -1,5 +1,12 @@
 """Scenarios: true motion and camera -> measurements and ground truth."""
 
+from ._fixed_camera import (
+    K_EQ63 as K_EQ63,
+    RHO_EQ63 as RHO_EQ63,
+    FixedCameraScenario as FixedCameraScenario,
+    fixed_camera_scenario as fixed_camera_scenario,
+    section6_velocity as section6_velocity,
+)
 from ._planar import (
     PlanarScenes as PlanarScenes,
     random_planar_scenes as random_planar_scenes,

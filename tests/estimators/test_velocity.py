@@ -1,0 +1,203 @@
+"""Seed 000 end to end: e, J, depth recovery, the estimator and the section-6 simulation."""
+
+import importlib.util
+import pathlib
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from visjax.estimators import (
+    Stream,
+    VelocityEstimator,
+    depth_from_known_length,
+    diagonal_intersection,
+    fixed_camera_stream,
+    paper_eq56_matrix,
+    plane_normal_from_frames,
+    run,
+    summary_rms,
+    velocity_measurements,
+    window_rms_reducer,
+)
+from visjax.geometry import euclidean_reconstruction, pixel_to_normalized, project, so3_exp
+from visjax.sim import K_EQ63, RHO_EQ63, fixed_camera_scenario
+
+K = jnp.array(K_EQ63)
+RHO = jnp.array(RHO_EQ63)
+
+
+def _numpy_reference():
+    path = pathlib.Path(__file__).parents[2] / "benchmarks" / "velocity_numpy_reference.py"
+    spec = importlib.util.spec_from_file_location("velocity_numpy_reference", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.numpy_velocity_estimator
+
+
+@pytest.fixture(scope="module")
+def sc1k():
+    return fixed_camera_scenario(10.0, 1000.0)
+
+
+def _stream(sc):
+    stream, _, _ = fixed_camera_stream(
+        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], truth=sc.velocity
+    )
+    return stream
+
+
+def test_e_dot_equals_J_v():
+    """eq. (32): the time derivative of the reconstruction-based e is J v (jvp vs J v)."""
+    sc = fixed_camera_scenario(0.01, 1000.0)  # only the constants are used
+    A, R_star, s, x_f_star = sc.A, sc.R_star, sc.s, sc.x_f_star
+    p_ref = project(x_f_star + s @ R_star.T, A)
+    rng = np.random.default_rng(0)
+    poses = [(np.zeros(3), np.zeros(3))]  # the reference pose itself (H = I)
+    poses += [(0.3 * rng.normal(size=3), 0.1 * rng.normal(size=3)) for _ in range(6)]
+
+    @jax.jit
+    def check(phi, dx, v):
+        R0 = so3_exp(phi) @ R_star
+        x0 = x_f_star + dx
+
+        def e_of_t(t):
+            R = so3_exp(t * v[3:]) @ R0  # [omega]x = dR/dt R^T = [v[3:]]x
+            x = x0 + t * v[:3]
+            p = project(x + s @ R.T, A)
+            return velocity_measurements(p_ref, p, A, R_star, s[0], sc.z1_star, sc.n_star).e
+
+        y = velocity_measurements(
+            p_ref, project(x0 + s @ R0.T, A), A, R_star, s[0], sc.z1_star, sc.n_star
+        )
+        _, e_dot = jax.jvp(e_of_t, (jnp.zeros(()),), (jnp.ones(()),))
+        return y.J @ v, e_dot, y.J_inv @ y.J
+
+    for phi, dx in poses:
+        Jv, e_dot, eye = check(jnp.asarray(phi), jnp.asarray(dx), jnp.asarray(rng.normal(size=6)))
+        np.testing.assert_allclose(Jv, e_dot, rtol=1e-6, atol=1e-9 * np.max(np.abs(e_dot)))
+        np.testing.assert_allclose(eye, np.eye(6), atol=1e-10)
+
+
+def test_depth_recovery_and_the_singular_eq56(sc1k):
+    sc = sc1k
+    p_ref = sc.pixels[0]
+    frames = sc.pixels[2000::500]  # away from the reference pose
+    n_star = plane_normal_from_frames(p_ref, frames, sc.A)
+    np.testing.assert_allclose(n_star, sc.n_star, atol=1e-10)
+    z1 = depth_from_known_length(
+        p_ref[0], diagonal_intersection(p_ref), sc.A, n_star, sc.R_star, sc.s[0]
+    )
+    np.testing.assert_allclose(z1, sc.z1_star, rtol=1e-8)
+    # eq. (56) as printed inverts a singular matrix: m1*_bar = x_f* + R* s1 is its null vector
+    for k in (2000, 4000, 7000):
+        rec = euclidean_reconstruction(p_ref, sc.pixels[k], sc.A, n_star=n_star)
+        m1s = np.append(pixel_to_normalized(p_ref[0], sc.A), 1.0)
+        m1 = np.append(pixel_to_normalized(sc.pixels[k, 0], sc.A), 1.0)
+        M = paper_eq56_matrix(m1s, m1, rec.alpha[0], n_star, rec.x_h, rec.R_bar)
+        sv = np.linalg.svd(np.asarray(M), compute_uv=False)
+        assert sv[-1] < 1e-10 * sv[0]
+        np.testing.assert_allclose(M @ (sc.x_f_star + sc.R_star @ sc.s[0]), 0.0, atol=1e-10)
+
+
+def test_section6_simulation_converges_and_improves_with_rate(sc1k):
+    """Noise-free section 6: per-DOF RMS over 5-10 s below 0.05; smaller at 4 kHz."""
+    red = window_rms_reducer(5.0, 10.0)
+    est = VelocityEstimator(K=K, rho=RHO)
+    rms = {}
+    for rate, sc in ((1000, sc1k), (4000, fixed_camera_scenario(10.0, 4000.0))):
+        sol = run(est, _stream(sc), save_every=None, reducer=red)
+        rms[rate] = np.asarray(summary_rms(sol.summary))
+    assert np.all(rms[1000] < 0.05), rms[1000]
+    assert np.all(rms[4000] < 0.7 * rms[1000]), (rms[1000], rms[4000])
+
+
+def test_settles_from_a_wrong_initial_estimate(sc1k):
+    """Started with v_hat(0) = 0.5 on every axis (true: 0), the error decays to the band."""
+    est = VelocityEstimator(K=K, rho=RHO)
+    stream = _stream(sc1k)
+    y0 = jax.tree_util.tree_map(lambda x: x[0], stream.ys)
+    e_hat0, _ = est.init(y0)
+    state0 = (e_hat0, y0.J @ jnp.full(6, 0.5))  # kappa_hat(0) = J v_wrong, eq. (40)
+    sol = run(est, stream, save_every=10, state0=state0)
+    err = np.abs(np.asarray(sol.outputs) - np.asarray(sc1k.velocity[::10]))
+    np.testing.assert_allclose(err[0], 0.5, rtol=1e-9)
+    late = err[sol.ts >= 5.0].max(0)
+    assert np.all(late < 0.1), late
+    assert np.all(err[sol.ts >= 1.0].max(0) < 0.15)
+
+
+def test_agrees_with_numpy_reference():
+    """The per-step NumPy transcription of the benchmark and visjax, first 0.5 s."""
+    sc = fixed_camera_scenario(0.5, 1000.0)
+    stream, n_star, z1 = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0])
+    sol = run(VelocityEstimator(K=K, rho=RHO), stream)
+    ref = _numpy_reference()(
+        np.asarray(sc.pixels),
+        np.asarray(sc.A),
+        np.asarray(sc.R_star),
+        np.asarray(sc.s[0]),
+        float(z1),
+        np.asarray(n_star),
+        np.asarray(K),
+        np.asarray(RHO),
+        1e-3,
+    )
+    # the same discrete map: agreement far below the chattering (~1e-2) of the sign term
+    np.testing.assert_allclose(sol.outputs, ref, atol=1e-8)
+
+
+def test_vmap_over_gains_and_noise_and_grad():
+    sc = fixed_camera_scenario(0.3, 1000.0)
+    stream = _stream(sc)
+    red = window_rms_reducer(0.1, 0.3)
+
+    def rms(K, stream):
+        sol = run(VelocityEstimator(K=K, rho=RHO), stream, save_every=None, reducer=red)
+        return summary_rms(sol.summary)
+
+    Ks = K * jnp.array([[1.0], [0.5], [2.0]])
+    batched = jax.jit(jax.vmap(rms, in_axes=(0, None)))(Ks, stream)
+    for i in range(3):
+        np.testing.assert_allclose(batched[i], rms(Ks[i], stream), rtol=1e-12)
+    # noise seeds: the preprocessing and the run, vmapped over keys
+    keys = jax.random.split(jax.random.key(1), 3)
+
+    def noisy(key):
+        p = sc.pixels + 0.5 * jax.random.normal(key, sc.pixels.shape)
+        s, _, _ = fixed_camera_stream(
+            sc.ts,
+            p,
+            sc.A,
+            sc.R_star,
+            sc.s[0],
+            n_star=sc.n_star,
+            z1_star=sc.z1_star,
+            truth=sc.velocity,
+        )
+        return rms(K, s)
+
+    by_seed = jax.jit(jax.vmap(noisy))(keys)
+    for i in range(3):
+        np.testing.assert_allclose(by_seed[i], noisy(keys[i]), rtol=1e-10)
+    assert np.all(by_seed > batched[0])  # noise costs accuracy
+    # gradient of the RMS with respect to K: finite, reverse == forward
+    loss = lambda K: jnp.sum(rms(K, stream))  # noqa: E731
+    g = jax.grad(loss)(K)
+    assert np.all(np.isfinite(g))
+    np.testing.assert_allclose(jax.jacfwd(loss)(K), g, rtol=1e-8, atol=1e-14)
+
+
+def test_gain_and_input_errors():
+    with pytest.raises(ValueError, match=r"shape \(6,\)"):
+        VelocityEstimator(K=jnp.ones(5), rho=RHO)
+    with pytest.raises(ValueError, match="positive"):
+        VelocityEstimator(K=K.at[2].set(-1.0), rho=RHO)
+    sc = fixed_camera_scenario(0.01, 1000.0)
+    bad = sc.pixels[3].at[1, 0].set(jnp.nan)
+    with pytest.raises(Exception, match="not finite"):
+        velocity_measurements(sc.pixels[0], bad, sc.A, sc.R_star, sc.s[0], sc.z1_star, sc.n_star)
+    with pytest.raises(ValueError, match="one time per frame"):
+        fixed_camera_stream(sc.ts[:3], sc.pixels, sc.A, sc.R_star, sc.s[0])
+    assert isinstance(Stream(ts=sc.ts, ys=sc.pixels), Stream)

@@ -1,0 +1,23 @@
+"""The papers' observers and update laws, and the runner they share."""
+
+from ._base import (
+    AbstractEstimator as AbstractEstimator,
+    Reducer as Reducer,
+    Solution as Solution,
+    Stream as Stream,
+    run as run,
+    summary_rms as summary_rms,
+    window_rms_reducer as window_rms_reducer,
+)
+from ._velocity import (
+    VelocityEstimator as VelocityEstimator,
+    VelocityMeasurement as VelocityMeasurement,
+    depth_from_known_length as depth_from_known_length,
+    diagonal_intersection as diagonal_intersection,
+    error_signal as error_signal,
+    fixed_camera_stream as fixed_camera_stream,
+    kinematics_jacobian as kinematics_jacobian,
+    paper_eq56_matrix as paper_eq56_matrix,
+    plane_normal_from_frames as plane_normal_from_frames,
+    velocity_measurements as velocity_measurements,
+)

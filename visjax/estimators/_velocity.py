@@ -1,0 +1,356 @@
+"""The fixed-camera 6-DoF velocity estimator of seed 000, sections 4 and 5.
+
+Source: Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity with a
+fixed camera*. Signals: the error $e = [e_v, e_\\omega]$ (eqs. (18)-(20), (24), (28)), the
+Jacobian-like matrix $J$ with $\\dot e = J v$ (eq. (33)), the continuous estimator
+(eqs. (39)-(40)) and the velocity $\\hat v = J^{-1}\\hat\\kappa$ (Theorem 2).
+
+Convention: feature 1 of the paper is row 0 of every pixel array. $v = [v_e, \\omega_e]$ is
+the object's linear velocity (of the origin of its frame $\\mathcal F$) and angular velocity,
+both expressed in the camera frame $\\mathcal I$.
+
+Everything that depends on one sample only (the reconstruction, $e$, $J$, $J^{-1}$) is in
+`velocity_measurements`, vmapped over all samples before the time loop; the estimator's
+time loop then costs a few dozen flops per step.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .._results import RESULTS, raise_or_keep
+from ..geometry import (
+    L_omega,
+    L_omega_inv,
+    euclidean_reconstruction,
+    extended_intrinsics,
+    pixel_to_normalized,
+    skew,
+    so3_log,
+    to_homogeneous,
+)
+from ..geometry._util import as_float, check_points, check_shape
+from ._base import AbstractEstimator
+
+
+class VelocityMeasurement(eqx.Module):
+    """One sample of what the velocity estimator reads.
+
+    **Fields:** `e` (6,): $e = [e_v, e_\\omega]$; `J` (6, 6): eq. (33); `J_inv` (6, 6): its
+    inverse, in closed form from the block structure.
+    """
+
+    e: Float[Array, "6"]
+    J: Float[Array, "6 6"]
+    J_inv: Float[Array, "6 6"]
+
+
+def error_signal(
+    p1_cur: Float[ArrayLike, "2"],
+    p1_ref: Float[ArrayLike, "2"],
+    alpha1: Float[ArrayLike, ""],
+    R_bar: Float[ArrayLike, "3 3"],
+) -> Float[Array, "6"]:
+    """The error $e = [e_v, e_\\omega]$ of seed 000.
+
+    $e_v = p_e - p_e^* = [u_1 - u_1^*, v_1 - v_1^*, -\\ln\\alpha_1]$ (eqs. (18)-(20), the third
+    entry being $\\ln z_1 - \\ln z_1^* = -\\ln\\alpha_1$), and $e_\\omega = u\\theta$ of
+    $\\bar R$ (eqs. (24), (28)).
+    """
+    p1_cur, p1_ref, alpha1, R_bar = (as_float(x) for x in (p1_cur, p1_ref, alpha1, R_bar))
+    e_v = jnp.concatenate([p1_cur - p1_ref, -jnp.log(alpha1)[None]])
+    return jnp.concatenate([e_v, so3_log(R_bar)])
+
+
+def _L_v(m1):
+    """$L_v$ of eq. (23) from the normalized coordinates $[x_1/z_1, y_1/z_1]$."""
+    dtype = m1.dtype
+    L = jnp.eye(3, dtype=dtype)
+    return L.at[0, 2].set(-m1[0]).at[1, 2].set(-m1[1])
+
+
+def kinematics_jacobian(
+    A: Float[ArrayLike, "3 3"],
+    m1: Float[ArrayLike, "2"],
+    alpha1: Float[ArrayLike, ""],
+    z1_star: Float[ArrayLike, ""],
+    R: Float[ArrayLike, "3 3"],
+    s1: Float[ArrayLike, "3"],
+    e_omega: Float[ArrayLike, "3"],
+) -> tuple[Float[Array, "6 6"], Float[Array, "6 6"]]:
+    """The Jacobian-like matrix $J$ of eq. (33) and its inverse.
+
+    $J = \\begin{bmatrix} \\frac{\\alpha_1}{z_1^*} A_e L_v &
+    -\\frac{\\alpha_1}{z_1^*} A_e L_v R [s_1]_\\times R^T \\\\ 0 & L_\\omega \\end{bmatrix}$, with
+    $A_e$ of eq. (22), $L_v$ of eq. (23) and $L_\\omega$ of eq. (27). Writing the top-left block
+    $B$, $J^{-1} = \\begin{bmatrix} B^{-1} & R[s_1]_\\times R^T L_\\omega^{-1} \\\\ 0 &
+    L_\\omega^{-1}\\end{bmatrix}$.
+
+    **Arguments:** `A` the intrinsics; `m1` the current normalized coordinates of feature 1;
+    `alpha1` its depth ratio; `z1_star` its reference depth; `R` the current rotation of the
+    object, $R = \\bar R R^*$ (eq. (8)); `s1` feature 1 in the object frame; `e_omega`
+    $= u\\theta$ of $\\bar R$.
+
+    **Returns:** `(J, J_inv)`.
+    """
+    A, m1, alpha1, z1_star, R, s1, e_omega = (
+        as_float(x) for x in (A, m1, alpha1, z1_star, R, s1, e_omega)
+    )
+    dtype = A.dtype
+    Ae = extended_intrinsics(A)
+    Lv = _L_v(m1)
+    B = (alpha1 / z1_star) * (Ae @ Lv)
+    Rs = R @ skew(s1) @ R.T
+    Lw = L_omega(e_omega)
+    zero = jnp.zeros((3, 3), dtype)
+    J = jnp.block([[B, -B @ Rs], [zero, Lw]])
+    Lv_inv = jnp.eye(3, dtype=dtype).at[0, 2].set(m1[0]).at[1, 2].set(m1[1])
+    B_inv = (z1_star / alpha1) * (Lv_inv @ jnp.linalg.inv(Ae))
+    Lw_inv = L_omega_inv(e_omega)
+    J_inv = jnp.block([[B_inv, Rs @ Lw_inv], [zero, Lw_inv]])
+    return J, J_inv
+
+
+def velocity_measurements(
+    p_ref: Float[ArrayLike, "n 2"],
+    p_cur: Float[ArrayLike, "n 2"],
+    A: Float[ArrayLike, "3 3"],
+    R_star: Float[ArrayLike, "3 3"],
+    s1: Float[ArrayLike, "3"],
+    z1_star: Float[ArrayLike, ""],
+    n_star: Float[ArrayLike, "3"],
+    *,
+    throw: bool = True,
+) -> VelocityMeasurement:
+    """$e$, $J$ and $J^{-1}$ of one frame (seed 000, sections 3-5). Vmap it over frames.
+
+    The reconstruction uses the known-normal path (smooth at the reference pose, where the
+    paper's simulation starts); $R = \\bar R R^*$ (eq. (8)).
+
+    **Arguments:** `p_ref`, `p_cur` reference and current pixels, feature 1 first; `A`;
+    `R_star` the known reference orientation; `s1` feature 1 in the object frame; `z1_star`
+    its reference depth (`depth_from_known_length`); `n_star` the plane normal
+    (`plane_normal_from_frames`); `throw` as in `euclidean_reconstruction`.
+    """
+    p_ref = check_points(p_ref, "p_ref")
+    A = as_float(A)
+    R_star = as_float(R_star)
+    check_shape(R_star, (3, 3), "R_star")
+    s1 = as_float(s1)
+    check_shape(s1, (3,), "s1")
+    rec = euclidean_reconstruction(p_ref, p_cur, A, n_star=n_star, throw=False)
+    p_cur = as_float(p_cur)
+    e = error_signal(p_cur[0], p_ref[0], rec.alpha[0], rec.R_bar)
+    m1 = pixel_to_normalized(p_cur[0], A)
+    J, J_inv = kinematics_jacobian(A, m1, rec.alpha[0], z1_star, rec.R_bar @ R_star, s1, e[3:])
+    ok = jnp.all(jnp.isfinite(J_inv)) & jnp.all(jnp.isfinite(J))
+    result = RESULTS.where(
+        rec.result != RESULTS.successful,
+        rec.result,
+        RESULTS.where(ok, RESULTS.successful, RESULTS.singular_jacobian),
+    )
+    out = VelocityMeasurement(e=e, J=J, J_inv=J_inv)
+    return raise_or_keep(result, out, throw)
+
+
+def depth_from_known_length(
+    p1_ref: Float[ArrayLike, "2"],
+    p0_ref: Float[ArrayLike, "2"],
+    A: Float[ArrayLike, "3 3"],
+    n_star: Float[ArrayLike, "3"],
+    R_star: Float[ArrayLike, "3 3"],
+    s1: Float[ArrayLike, "3"],
+) -> Float[Array, ""]:
+    """The reference depth $z_1^*$ of feature 1 from the known vector $s_1$ (replaces eq. (56)).
+
+    Eq. (56) of the paper, $x_f^* = [\\mathrm{diag}(\\bar\\gamma_1 - \\bar\\gamma_2) + \\bar R]^{-1}
+    [\\mathrm{diag}(\\bar\\gamma_1 - \\bar\\gamma_2) R^* - R] s_1$, cannot be used as printed: with
+    $\\bar\\gamma_{1,2}$ of eq. (57), $(\\bar\\gamma_2 - \\bar\\gamma_1)_j\\, \\bar m^*_{1j} =
+    z_1^* (m_1/\\alpha_1 - (n^{*T} m_1^*)\\bar x_h)_j = (\\bar R \\bar m_1^*)_j$ by eqs. (7),
+    (12), (13), so $\\bar m_1^* = x_f^* + R^* s_1$ is a null vector of the matrix it inverts
+    (`tests/estimators/test_velocity.py` checks this numerically). The reason is physical:
+    $s_1$ cancels from every image relation (eq. (7) holds for any object origin), so the
+    images of feature 1 alone fix no scale.
+
+    The paper's premise, "a single geometric length between two feature points on the object
+    be known", does fix it once the object origin is a point whose image is known: then
+    $R^* s_1 = \\bar m_1^* - x_f^*$ with both points on the plane, $z_i^* = d^* / (n^{*T}
+    m_i^*)$ (eq. (4)), so $R^* s_1 = d^* w$ with $w = m_1^*/(n^{*T}m_1^*) - m_0^*/(n^{*T}
+    m_0^*)$. This returns the least-squares $d^* = w^T R^* s_1 / w^T w$ and
+    $z_1^* = d^*/(n^{*T} m_1^*)$ (eq. (58), third row). Noise-free it is exact.
+
+    **Arguments:**
+
+    - `p1_ref`: reference pixel of feature 1.
+    - `p0_ref`: reference pixel of the object-frame origin (for a parallelogram of
+        features centred on the origin, `diagonal_intersection` of the four).
+    - `A`, `n_star`, `R_star`, `s1`: intrinsics, plane normal, reference orientation,
+        feature 1 in the object frame.
+
+    **Returns:** $z_1^*$ (a runtime error if it is not positive).
+    """
+    p1_ref, p0_ref, A, n_star, R_star, s1 = (
+        as_float(x) for x in (p1_ref, p0_ref, A, n_star, R_star, s1)
+    )
+    check_shape(p1_ref, (2,), "p1_ref")
+    check_shape(p0_ref, (2,), "p0_ref")
+    check_shape(n_star, (3,), "n_star")
+    check_shape(R_star, (3, 3), "R_star")
+    check_shape(s1, (3,), "s1")
+    m1 = to_homogeneous(pixel_to_normalized(p1_ref, A))
+    m0 = to_homogeneous(pixel_to_normalized(p0_ref, A))
+    n = n_star / jnp.linalg.norm(n_star)
+    w = m1 / (n @ m1) - m0 / (n @ m0)
+    d_star = (w @ (R_star @ s1)) / (w @ w)
+    z1 = d_star / (n @ m1)
+    return eqx.error_if(z1, ~(z1 > 0.0), "depth recovery gave z1* <= 0: check s1, R*, n*.")
+
+
+def paper_eq56_matrix(m1_star, m1, alpha1, n_star, x_h, R_bar) -> Float[Array, "3 3"]:
+    """The matrix $\\mathrm{diag}(\\bar\\gamma_1 - \\bar\\gamma_2) + \\bar R$ that eq. (56) inverts.
+
+    Kept to document (and test) that it is singular; see `depth_from_known_length`.
+    $\\bar\\gamma_1 = \\mathrm{diag}(m_1^*)^{-1} n^{*T} m_1^* \\bar x_h$,
+    $\\bar\\gamma_2 = \\mathrm{diag}(m_1^*)^{-1} m_1/\\alpha_1$ (eq. (57)).
+    """
+    m1_star, m1, alpha1, n_star, x_h, R_bar = (
+        as_float(x) for x in (m1_star, m1, alpha1, n_star, x_h, R_bar)
+    )
+    g1 = (n_star @ m1_star) * x_h / m1_star
+    g2 = (m1 / alpha1) / m1_star
+    return jnp.diag(g1 - g2) + R_bar
+
+
+def diagonal_intersection(p: Float[ArrayLike, "4 2"]) -> Float[Array, "2"]:
+    """The image of the intersection of the diagonals 1-3 and 2-4 of four plane points.
+
+    Lines and their intersections are preserved by perspective projection, so this is the
+    pixel of the diagonals' intersection on the plane (the object origin in the section-6
+    scenario of visjax, where the features are a square centred on it).
+    """
+    p = check_points(p, "p")
+    if p.shape[0] != 4:
+        raise ValueError(f"`p` must hold exactly 4 points; got {p.shape[0]}.")
+    h = to_homogeneous(p)
+    x = jnp.cross(jnp.cross(h[0], h[2]), jnp.cross(h[1], h[3]))
+    return x[:2] / x[2]
+
+
+def plane_normal_from_frames(
+    p_ref: Float[ArrayLike, "n 2"],
+    p_frames: Float[ArrayLike, "N n 2"],
+    A: Float[ArrayLike, "3 3"],
+    n_prior: Float[ArrayLike, "3"] | None = None,
+) -> Float[Array, "3"]:
+    """The constant plane normal $n^*$ from a sequence of frames.
+
+    Each frame is decomposed with the general method (eq. (12)); near the reference pose the
+    normal is ill-determined (it is undefined at $H = I$), so the normals are averaged with
+    weights $\\|\\bar x_h\\|^2$. Frames whose reconstruction fails get weight 0.
+    """
+    p_frames = as_float(p_frames)
+    if p_frames.ndim != 3:
+        raise ValueError(f"`p_frames` must have shape (N, n, 2); got {tuple(p_frames.shape)}.")
+    rec = jax.vmap(lambda pc: euclidean_reconstruction(p_ref, pc, A, n_prior, throw=False))(
+        p_frames
+    )
+    w = jnp.where(rec.result == RESULTS.successful, jnp.sum(rec.x_h**2, axis=-1), 0.0)
+    n = jnp.sum(w[:, None] * rec.n_star, axis=0)
+    n = eqx.error_if(
+        n, ~(jnp.sum(w) > 0.0), "No frame moves away from the reference pose: n* is unobservable."
+    )
+    return n / jnp.linalg.norm(n)
+
+
+class VelocityEstimator(AbstractEstimator):
+    """The continuous sign-based velocity estimator of seed 000, eqs. (39)-(40).
+
+    State: $(\\hat e, \\eta)$ with $\\eta = \\int_{t_0}^t (K + I_6)\\tilde e + \\rho\\,
+    \\mathrm{sgn}(\\tilde e)\\, d\\tau$, $\\tilde e = e - \\hat e$ (eq. (36)). Then
+    $\\hat\\kappa = \\eta + (K + I_6)\\tilde e$ (eq. (40)), $\\dot{\\hat e} = \\hat\\kappa$
+    (eq. (39)), and $\\hat v = J^{-1}\\hat\\kappa$ (Theorem 2). Initial state (the paper does
+    not fix it): $\\hat e(t_0) = e(t_0)$, $\\eta(t_0) = 0$.
+
+    The right-hand side is discontinuous: run it with fixed steps (the default Euler at the
+    sample rate is the paper's 1 kHz discretisation), never an adaptive controller.
+
+    **Fields:** `K`, `rho`: the diagonals of the positive definite diagonal gains (shape (6,)).
+    Measurements are `VelocityMeasurement`s.
+    """
+
+    K: Float[Array, "6"]
+    rho: Float[Array, "6"]
+
+    def __check_init__(self):
+        for name in ("K", "rho"):
+            g = getattr(self, name)
+            if jnp.shape(g) != (6,):
+                raise ValueError(
+                    f"`{name}` must be the diagonal of a 6x6 gain, shape (6,); got {jnp.shape(g)}."
+                )
+            if not isinstance(g, jax.core.Tracer) and not np.all(np.asarray(g) > 0):
+                raise ValueError(f"`{name}` must be positive (eq. (40)); got {np.asarray(g)}.")
+
+    def init(self, y0: VelocityMeasurement):
+        return (y0.e, jnp.zeros_like(y0.e))
+
+    def _kappa(self, state, y):
+        e_hat, eta = state
+        e_tilde = y.e - e_hat  # eq. (36)
+        return eta + (self.K + 1.0) * e_tilde, e_tilde  # eq. (40)
+
+    def vector_field(self, t, state, y: VelocityMeasurement):
+        kappa, e_tilde = self._kappa(state, y)
+        d_eta = (self.K + 1.0) * e_tilde + self.rho * jnp.sign(e_tilde)  # integrand of (40)
+        return (kappa, d_eta)  # eq. (39)
+
+    def output(self, t, state, y: VelocityMeasurement):
+        kappa, _ = self._kappa(state, y)
+        return y.J_inv @ kappa  # Theorem 2: v_hat = J^{-1} kappa_hat
+
+
+def fixed_camera_stream(
+    ts: Float[ArrayLike, " N"],
+    pixels: Float[ArrayLike, "N n 2"],
+    A: Float[ArrayLike, "3 3"],
+    R_star: Float[ArrayLike, "3 3"],
+    s1: Float[ArrayLike, "3"],
+    *,
+    origin_pixel: Float[ArrayLike, "2"] | None = None,
+    n_star: Float[ArrayLike, "3"] | None = None,
+    z1_star: Float[ArrayLike, ""] | None = None,
+    n_prior: Float[ArrayLike, "3"] | None = None,
+    truth=None,
+):
+    """The measurement `Stream` of the velocity estimator from raw pixel frames.
+
+    Frame 0 is the reference image. Unknown constants are measured first, once: the plane
+    normal by `plane_normal_from_frames` (unless `n_star` is given), then $z_1^*$ by
+    `depth_from_known_length` with the origin's pixel (default: `diagonal_intersection` of
+    the four reference features). Then $e$, $J$, $J^{-1}$ of every frame, vmapped.
+
+    **Returns:** `(stream, n_star, z1_star)`.
+    """
+    from ._base import Stream
+
+    pixels = as_float(pixels)
+    ts = as_float(ts)
+    if pixels.ndim != 3 or pixels.shape[-1] != 2:
+        raise ValueError(f"`pixels` must have shape (N, n, 2); got {tuple(pixels.shape)}.")
+    if ts.shape != pixels.shape[:1]:
+        raise ValueError(
+            f"`ts` must have one time per frame, shape ({pixels.shape[0]},); got {ts.shape}."
+        )
+    p_ref = pixels[0]
+    if n_star is None:
+        n_star = plane_normal_from_frames(p_ref, pixels, A, n_prior)
+    if z1_star is None:
+        if origin_pixel is None:
+            origin_pixel = diagonal_intersection(p_ref)
+        z1_star = depth_from_known_length(p_ref[0], origin_pixel, A, n_star, R_star, s1)
+    ys = jax.vmap(lambda pc: velocity_measurements(p_ref, pc, A, R_star, s1, z1_star, n_star))(
+        pixels
+    )
+    return Stream(ts=ts, ys=ys, truth=truth), n_star, z1_star
