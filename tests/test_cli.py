@@ -21,3 +21,26 @@ def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
 def test_geometry_rejects_too_few_points(capsys):
     assert main(["geometry", "--points", "3"]) == 2
     assert "at least 4" in capsys.readouterr().err
+
+
+def test_velocity_command(tmp_path, capsys):
+    assert main(["velocity", "--duration", "1", "--quiet", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "RMS" in printed and "vz" in printed
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    for key in ("rms_5_10s", "max_5_10s"):
+        assert len(summary[key]) == 6
+    assert summary["rate_hz"] == 1000.0 and summary["noise_px"] == 0.0
+    assert summary["duration_s"] == 1.0
+    assert summary["window_s"] == [0.5, 1.0]
+    assert max(summary["rms_5_10s"]) < 0.1  # noise-free: already in the chattering band
+    assert abs(summary["z1_star_recovered"] - 1.99) < 1e-8
+    assert (tmp_path / "velocity.png").stat().st_size > 20_000
+
+
+def test_velocity_rejects_bad_gains(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit):
+        main(["velocity", "--K", "1 2 3"])
+    assert "six positive numbers" in capsys.readouterr().err

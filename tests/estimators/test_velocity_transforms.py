@@ -1,0 +1,55 @@
+"""jit, vmap and grad of the seed-000 helper functions, against finite differences."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from tests.conftest import central_difference
+from visjax.estimators import depth_from_known_length, diagonal_intersection, kinematics_jacobian
+from visjax.kinematics import integrate_pose
+from visjax.sim import fixed_camera_scenario
+
+
+def test_depth_and_diagonal_jit_vmap_grad():
+    sc = fixed_camera_scenario(0.2, 1000.0)
+
+    def z1(p_ref):
+        p0 = diagonal_intersection(p_ref)
+        return depth_from_known_length(p_ref[0], p0, sc.A, sc.n_star, sc.R_star, sc.s[0])
+
+    p_ref = np.asarray(sc.pixels[0])
+    np.testing.assert_allclose(jax.jit(z1)(p_ref), sc.z1_star, rtol=1e-10)
+    g = jax.jit(jax.grad(z1))(p_ref)
+    np.testing.assert_allclose(g, central_difference(z1, p_ref, 1e-4), rtol=1e-6, atol=1e-10)
+    batched = jax.jit(jax.vmap(diagonal_intersection))(sc.pixels[::50])
+    for i, p in enumerate(sc.pixels[::50]):
+        np.testing.assert_allclose(batched[i], diagonal_intersection(p), rtol=1e-14)
+
+
+def test_kinematics_jacobian_grad():
+    A = jnp.array([[1268.16, 0.0, 257.49], [0.0, 1267.50, 253.10], [0.0, 0.0, 1.0]])
+
+    def f(x):
+        J, J_inv = kinematics_jacobian(
+            A, x[:2], x[2], 1.99, jnp.eye(3), jnp.array([-0.1, 0.1, 0.01]), x[3:]
+        )
+        return jnp.concatenate([J.ravel(), J_inv.ravel()])
+
+    x0 = np.array([0.05, -0.03, 1.1, 0.2, -0.1, 0.3])
+    np.testing.assert_allclose(
+        jax.jit(jax.jacfwd(f))(x0), central_difference(f, x0, 1e-6), rtol=1e-6, atol=1e-6
+    )
+
+
+def test_integrate_pose_gradient():
+    """x_f(T) = x0 + a (1 - cos T) for v = a sin t: d x_f(T) / d a = 1 - cos T."""
+    ts = jnp.linspace(0.0, 2.0, 5)
+
+    def final_x(a):
+        x, _ = integrate_pose(lambda t: a * jnp.sin(t) * jnp.ones(6), jnp.zeros(3), jnp.eye(3), ts)
+        return x[-1, 0]
+
+    np.testing.assert_allclose(final_x(0.3), 0.3 * (1 - np.cos(2.0)), rtol=1e-10)
+    np.testing.assert_allclose(jax.grad(final_x)(0.3), 1 - np.cos(2.0), rtol=1e-8)
+    xs = jax.vmap(final_x)(jnp.array([0.1, 0.2]))
+    np.testing.assert_allclose(xs, np.array([0.1, 0.2]) * (1 - np.cos(2.0)), rtol=1e-10)

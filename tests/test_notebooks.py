@@ -1,0 +1,26 @@
+"""The notebooks run end to end (on short settings)."""
+
+import os
+import pathlib
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+NOTEBOOKS = pathlib.Path(__file__).parents[1] / "notebooks"
+
+
+@pytest.mark.parametrize("name,env", [("velocity_fixed_camera.ipynb", {"VISJAX_NB_DURATION": "1"})])
+def test_notebook_executes(name, env, monkeypatch):
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    NotebookClient(
+        nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}
+    ).execute()
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    assert not any(o.get("output_type") == "error" for o in outputs)
+    text = "".join(o.get("text", "") for o in outputs if o.get("output_type") == "stream")
+    assert "z1* recovered" in text and "noise [px]" in text
+    assert os.environ["VISJAX_NB_DURATION"] == env["VISJAX_NB_DURATION"]

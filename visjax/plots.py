@@ -1,0 +1,46 @@
+"""Figures. Matplotlib is imported lazily, with the Agg backend when writing files."""
+
+import numpy as np
+
+DOF_LABELS = (
+    ("$v_x$", "m/s"),
+    ("$v_y$", "m/s"),
+    ("$v_z$", "m/s"),
+    ("$\\omega_x$", "rad/s"),
+    ("$\\omega_y$", "rad/s"),
+    ("$\\omega_z$", "rad/s"),
+)
+
+
+def plot_velocity(ts, velocity, estimate, *, title=None, path=None, max_points=2000):
+    """Like Fig. 2 of seed 000: per DOF, true and estimated velocity (left), error (right)."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ts, velocity, estimate = (np.asarray(x) for x in (ts, velocity, estimate))
+    step = max(1, len(ts) // max_points)
+    t, v, e = ts[::step], velocity[::step], estimate[::step]
+    fig, axes = plt.subplots(6, 2, figsize=(11, 12), sharex=True)
+    for i, (name, unit) in enumerate(DOF_LABELS):
+        ax = axes[i, 0]
+        ax.plot(t, v[:, i], "k-", lw=1.5, label="true")
+        ax.plot(t, e[:, i], "C1-", lw=0.8, label="estimate $J^{-1}\\hat\\kappa$")
+        ax.set_ylabel(f"{name} [{unit}]")
+        axes[i, 1].plot(t, v[:, i] - e[:, i], "C0-", lw=0.8)
+        axes[i, 1].set_ylabel(f"error {name} [{unit}]")
+        axes[i, 1].axhline(0.0, color="0.7", lw=0.5)
+    axes[0, 0].legend(fontsize=8, loc="upper right")
+    axes[0, 0].set_title("velocity")
+    axes[0, 1].set_title("velocity error $v - \\hat v$")
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 1].set_xlabel("time [s]")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig
