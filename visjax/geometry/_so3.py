@@ -63,6 +63,18 @@ def sinc(x: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
     return jnp.where(small, taylor, jnp.sin(x_safe) / x_safe)
 
 
+def _rotation_coefficients(t2):
+    """sin(t)/t, (1 - cos t)/t^2 and (t - sin t)/t^3 from t^2, with Taylor branches at 0
+    (double-`where`: finite value and gradient)."""
+    small = t2 < _small(t2.dtype)
+    t2_safe = jnp.where(small, jnp.ones_like(t2), t2)
+    t = jnp.sqrt(t2_safe)
+    a = jnp.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, jnp.sin(t) / t)
+    b = jnp.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
+    c = jnp.where(small, 1.0 / 6.0 - t2 / 120.0 + t2**2 / 5040.0, (t - jnp.sin(t)) / (t2_safe * t))
+    return a, b, c
+
+
 def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """The exponential map from a rotation vector $\\theta u$ to a rotation matrix.
 
@@ -78,12 +90,7 @@ def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     omega = as_float(omega)
     check_shape(omega, (3,), "omega")
-    t2 = jnp.sum(omega**2)
-    small = t2 < _small(omega.dtype)
-    t2_safe = jnp.where(small, jnp.ones_like(t2), t2)
-    t = jnp.sqrt(t2_safe)
-    a = jnp.where(small, 1.0 - t2 / 6.0 + t2**2 / 120.0, jnp.sin(t) / t)
-    b = jnp.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
+    a, b, _ = _rotation_coefficients(jnp.sum(omega**2))
     W = skew(omega)
     return jnp.eye(3, dtype=omega.dtype) + a * W + b * (W @ W)
 
@@ -189,11 +196,6 @@ def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
-    t2 = jnp.sum(e_omega**2)
-    small = t2 < _small(e_omega.dtype)
-    t2_safe = jnp.where(small, jnp.ones_like(t2), t2)
-    t = jnp.sqrt(t2_safe)
-    b = jnp.where(small, 0.5 - t2 / 24.0 + t2**2 / 720.0, (1.0 - jnp.cos(t)) / t2_safe)
-    c = jnp.where(small, 1.0 / 6.0 - t2 / 120.0 + t2**2 / 5040.0, (t - jnp.sin(t)) / (t2_safe * t))
+    _, b, c = _rotation_coefficients(jnp.sum(e_omega**2))
     W = skew(e_omega)
     return jnp.eye(3, dtype=e_omega.dtype) + b * W + c * (W @ W)
