@@ -1,5 +1,7 @@
 import json
 
+import pytest
+
 from visjax.cli import main
 
 
@@ -44,3 +46,33 @@ def test_velocity_rejects_bad_gains(capsys):
     with pytest.raises(SystemExit):
         main(["velocity", "--K", "1 2 3"])
     assert "six positive numbers" in capsys.readouterr().err
+
+
+def test_structure_command(tmp_path, capsys):
+    assert (
+        main(
+            [
+                "structure",
+                "--set",
+                "I.1",
+                "--set",
+                "II.2",
+                "--duration",
+                "10",
+                "--quiet",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
+    printed = capsys.readouterr().out
+    assert "Table 5-3" in printed and "Table 5-4" in printed
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(summary) == {"I.1", "II.2"}
+    assert summary["I.1"]["thesis_rms"] == [0.0016, 0.0047, 0.0214]
+    assert len(summary["II.2"]["rms"]) == 3
+    assert max(summary["I.1"]["rms"]) < 0.05  # metres, static point, 0.1 px
+    assert (tmp_path / "structure_I.1.png").stat().st_size > 20_000
+    with pytest.raises(SystemExit):
+        main(["structure", "--set", "III.9"])

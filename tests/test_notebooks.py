@@ -10,8 +10,18 @@ from nbclient import NotebookClient
 NOTEBOOKS = pathlib.Path(__file__).parents[1] / "notebooks"
 
 
-@pytest.mark.parametrize("name,env", [("velocity_fixed_camera.ipynb", {"VISJAX_NB_DURATION": "1"})])
-def test_notebook_executes(name, env, monkeypatch):
+@pytest.mark.parametrize(
+    "name,env,expect",
+    [
+        (
+            "velocity_fixed_camera.ipynb",
+            {"VISJAX_NB_DURATION": "1"},
+            ("z1* recovered", "noise [px]"),
+        ),
+        ("uio_moving_camera.ipynb", {"VISJAX_NB_DURATION": "4"}, ("rank (3.20)", "toolbox K_c")),
+    ],
+)
+def test_notebook_executes(name, env, expect, monkeypatch):
     for k, v in env.items():
         monkeypatch.setenv(k, v)
     monkeypatch.setenv("MPLBACKEND", "Agg")
@@ -22,5 +32,5 @@ def test_notebook_executes(name, env, monkeypatch):
     outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
     assert not any(o.get("output_type") == "error" for o in outputs)
     text = "".join(o.get("text", "") for o in outputs if o.get("output_type") == "stream")
-    assert "z1* recovered" in text and "noise [px]" in text
+    assert all(e in text for e in expect)
     assert os.environ["VISJAX_NB_DURATION"] == env["VISJAX_NB_DURATION"]

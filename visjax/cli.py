@@ -237,6 +237,59 @@ def velocity(args) -> dict:
     return summary
 
 
+def structure(args) -> dict:
+    _enable_x64()
+    from tqdm import tqdm
+
+    from .plots import plot_structure
+    from .sim import SETS
+    from .studies import structure_experiment
+
+    names = args.set or list(SETS)
+    for name in names:
+        if name not in SETS:
+            raise SystemExit(f"visjax structure: unknown set {name!r}; choose from {list(SETS)}")
+    out = None if args.out is None else Path(args.out)
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    summary = {}
+    for name in tqdm(names, desc="structure", unit="set", disable=args.quiet):
+        r = structure_experiment(name, args.duration, args.noise, seed=args.seed)
+        summary[name] = {
+            "rms": [float(x) for x in r.rms],
+            "thesis_rms": list(SETS[name].thesis_rms),
+        }
+        if out is not None:
+            kind = "moving" if SETS[name].moving else "static"
+            plot_structure(
+                r.ts,
+                r.position,
+                r.estimate,
+                path=out / f"structure_{name}.png",
+                title=f"seed 003, set {name} ({kind} point), simulated: pixel noise "
+                f"{args.noise:g} px, camera 30 Hz, observer 1 kHz",
+            )
+    print(
+        f"UIO (seed 003, eq. 3.5), simulated analogues: {args.duration:g} s, pixel noise "
+        f"{args.noise:g} px, RMS position error over the second half (m)"
+    )
+    for group, label in (("I.", "Table 5-3 (static point)"), ("II.", "Table 5-4 (moving point)")):
+        sets = [n for n in names if n.startswith(group)]
+        if not sets:
+            continue
+        print(f"\n{label}: visjax (thesis)")
+        print(f"{'':<4}" + "".join(f"{n:>20}" for n in sets))
+        for i, axis in enumerate("xyz"):
+            row = "".join(
+                f"{summary[n]['rms'][i]:>11.4f} ({summary[n]['thesis_rms'][i]:.4f})" for n in sets
+            )
+            print(f"{axis:<4}{row}")
+    if out is not None:
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        print(f"\nwrote {out / 'summary.json'} and structure_<set>.png")
+    return summary
+
+
 def reproduce(args) -> dict:
     """Every paper's main experiment into one folder, then a summary table."""
     out = Path(args.out)
@@ -264,6 +317,17 @@ def reproduce(args) -> dict:
             out=str(out / "geometry"),
         )
     )
+    print("\n== seed 003: unknown input observer, the thesis' seven sets (simulated) ==")
+    results["structure"] = structure(
+        argparse.Namespace(
+            set=None,
+            duration=20.0 if args.quick else 30.0,
+            noise=0.1,
+            seed=0,
+            out=str(out / "structure"),
+            quiet=args.quiet,
+        )
+    )
     v, g = results["velocity"], results["geometry"]["errors"]
     rows = [
         ("000 velocity, max RMS 5-10 s (m/s, rad/s)", f"{max(v['rms_5_10s']):.4f}", "< 0.05"),
@@ -274,6 +338,13 @@ def reproduce(args) -> dict:
             f"OpenCV {g['opencv']['R_bar_deg']['max']:.1e}",
         ),
     ]
+    st = results["structure"]
+    static = [n for n in st if n.startswith("I.")]
+    moving = [n for n in st if n.startswith("II.")]
+    for names, what in ((static, "static"), (moving, "moving")):
+        mean = float(np.mean([st[n]["rms"] for n in names]))
+        thesis = float(np.mean([st[n]["thesis_rms"] for n in names]))
+        rows.append((f"003 UIO {what} point, mean RMS (m)", f"{mean:.4f}", f"thesis {thesis:.4f}"))
     print("\n== summary ==")
     for name, value, ref in rows:
         print(f"{name:<46}{value:>12}   ({ref})")
@@ -341,6 +412,20 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--out", type=str, default=None, help="directory for summary.json and figure")
     v.add_argument("--quiet", action="store_true", help="no progress bar")
     v.set_defaults(func=velocity)
+
+    st = sub.add_parser(
+        "structure",
+        help="seed 003: the unknown input observer on simulated analogues of the thesis' sets",
+    )
+    st.add_argument("--set", action="append", help="I.1 ... II.3 (repeatable; default: all)")
+    st.add_argument("--duration", type=float, default=30.0, help="seconds per set (default 30)")
+    st.add_argument(
+        "--noise", type=float, default=0.1, help="pixel noise sigma in px (default 0.1)"
+    )
+    st.add_argument("--seed", type=int, default=0)
+    st.add_argument("--out", type=str, default=None, help="directory for figures and summary")
+    st.add_argument("--quiet", action="store_true", help="no progress bar")
+    st.set_defaults(func=structure)
 
     r = sub.add_parser("reproduce", help="every paper's main experiment, figures and a summary")
     r.add_argument("--quick", action="store_true", help="smaller geometry batch")

@@ -44,3 +44,41 @@ def plot_velocity(ts, velocity, estimate, *, title=None, path=None, max_points=2
         fig.savefig(path, dpi=110)
         plt.close(fig)
     return fig
+
+
+def plot_structure(ts, position, estimate, *, title=None, path=None):
+    """Like Figs. 5-7 and 5-8 of seed 003: actual (dashed) and estimated (solid) position of
+    the point in the camera frame (left), and the estimation error (right), in metres."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ts, position, estimate = (np.asarray(x) for x in (ts, position, estimate))
+    fig, axes = plt.subplots(3, 2, figsize=(10, 7), sharex=True)
+    for i, name in enumerate("XYZ"):
+        axes[i, 0].plot(ts, position[:, i], "k--", lw=1.2, label="actual")
+        axes[i, 0].plot(ts, estimate[:, i], "C0-", lw=1.0, label="estimated")
+        axes[i, 0].set_ylabel(f"{name} [m]")
+        axes[i, 1].plot(ts, estimate[:, i] - position[:, i], "C3-", lw=0.8)
+        axes[i, 1].axhline(0.0, color="0.7", lw=0.5)
+        axes[i, 1].set_ylabel(f"error {name} [m]")
+    axes[0, 0].legend(fontsize=8)
+    axes[0, 0].set_title("position of the point (camera frame)")
+    axes[0, 1].set_title("estimation error")
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 1].set_xlabel("time [s]")
+    # the transient of the depth dwarfs the steady state: zoom the error axes on it
+    half = ts >= ts[-1] / 2
+    for i in range(3):
+        err = estimate[half, i] - position[half, i]
+        lim = 4 * max(np.max(np.abs(err)), 1e-4)
+        axes[i, 1].set_ylim(-lim, lim)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig

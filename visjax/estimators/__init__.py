@@ -9,6 +9,15 @@ from ._base import (
     summary_rms as summary_rms,
     window_rms_reducer as window_rms_reducer,
 )
+from ._uio import (
+    UnknownInputObserver as UnknownInputObserver,
+    camera_term as camera_term,
+    known_input_term as known_input_term,
+    perspective_dynamics as perspective_dynamics,
+    rank_condition as rank_condition,
+    uio_matrices as uio_matrices,
+    uio_residuals as uio_residuals,
+)
 from ._velocity import (
     VelocityEstimator as VelocityEstimator,
     VelocityMeasurement as VelocityMeasurement,

@@ -1,5 +1,9 @@
 """Camera model, SO(3), homography estimation and decomposition: pure JAX functions."""
 
+from ._calibration import (
+    camera_matrix as camera_matrix,
+    camera_matrix_lstsq as camera_matrix_lstsq,
+)
 from ._camera import (
     extended_intrinsics as extended_intrinsics,
     intrinsic_matrix as intrinsic_matrix,

@@ -1,5 +1,10 @@
 """Experiments, vmapped Monte-Carlo sweeps and gain studies."""
 
+from ._structure import (
+    StructureRun as StructureRun,
+    observer_for as observer_for,
+    structure_experiment as structure_experiment,
+)
 from ._velocity import (
     DOF_NAMES as DOF_NAMES,
     VelocityRun as VelocityRun,

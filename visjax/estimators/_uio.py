@@ -1,0 +1,190 @@
+"""The unknown input observer (UIO) of seed 003 (Jang's thesis, chapters 2-3).
+
+Perspective dynamics of a point seen by a moving camera, in the state
+$x = [X/Z, Y/Z, 1/Z]$ with output $y = [x_1, x_2]$, measured camera velocities
+$u = [v_c, \\omega]$ and the point's own velocity as unknown input (eq. (2.11)); the observer
+(3.5) $\\dot z = N z + L y + M \\bar f(\\hat x, u) + M g(y, u)$, $\\hat x = z - E y$; and the
+checks of chapter 3. Equation numbers are the thesis'; `THESIS_NOTES.md` restates them.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ..geometry._util import as_float, check_shape
+from ._base import AbstractEstimator
+
+C_OUTPUT = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # y = C x, eq. (3.1)
+
+
+def known_input_term(y: Float[ArrayLike, "2"], u: Float[ArrayLike, "6"]) -> Float[Array, "3"]:
+    """$g(y, u) = [\\Omega_1, \\Omega_2, 0]$ of eqs. (2.11), (3.1): the rotation-induced flow.
+
+    $\\Omega_1 = x_1 x_2 \\omega_x - \\omega_y - x_1^2\\omega_y + x_2\\omega_z$,
+    $\\Omega_2 = \\omega_x + x_2^2\\omega_x - x_1 x_2\\omega_y - x_1\\omega_z$.
+    """
+    x1, x2 = y[0], y[1]
+    wx, wy, wz = u[3], u[4], u[5]
+    o1 = x1 * x2 * wx - wy - x1**2 * wy + x2 * wz
+    o2 = wx + x2**2 * wx - x1 * x2 * wy - x1 * wz
+    return jnp.stack([o1, o2, jnp.zeros_like(o1)])
+
+
+def camera_term(x: Float[ArrayLike, "3"], u: Float[ArrayLike, "6"]) -> Float[Array, "3"]:
+    """$f(x, u) = [f_1, f_2, f_3]$ of eq. (2.11): the camera-translation flow.
+
+    $f_1 = (x_1 v_{cz} - v_{cx}) x_3$, $f_2 = (x_2 v_{cz} - v_{cy}) x_3$,
+    $f_3 = v_{cz} x_3^2 + (x_2\\omega_x - x_1\\omega_y) x_3$.
+    """
+    x1, x2, x3 = x[0], x[1], x[2]
+    vcx, vcy, vcz, wx, wy = u[0], u[1], u[2], u[3], u[4]
+    return jnp.stack(
+        [
+            (x1 * vcz - vcx) * x3,
+            (x2 * vcz - vcy) * x3,
+            vcz * x3**2 + (x2 * wx - x1 * wy) * x3,
+        ]
+    )
+
+
+def perspective_dynamics(
+    x: Float[ArrayLike, "3"], u: Float[ArrayLike, "6"], v_p: Float[ArrayLike, "3"]
+) -> Float[Array, "3"]:
+    """$\\dot x$ of eq. (2.11) for a point moving with velocity $v_p$ (camera basis).
+
+    $\\dot x = f(x, u) + g(y, u) + [v_{px} x_3 - x_1 v_{pz} x_3,\\ v_{py} x_3 - x_2 v_{pz}
+    x_3,\\ -v_{pz} x_3^2]$; the last term is $D d$ with $d$ of eq. (3.21). Used by the
+    simulator (the truth) and, without the unknown term, by the observer.
+    """
+    x, u, v_p = as_float(x), as_float(u), as_float(v_p)
+    x1, x2, x3 = x[0], x[1], x[2]
+    unknown = jnp.stack(
+        [v_p[0] * x3 - x1 * v_p[2] * x3, v_p[1] * x3 - x2 * v_p[2] * x3, -v_p[2] * x3**2]
+    )
+    return camera_term(x, u) + known_input_term(x[:2], u) + unknown
+
+
+def _pinv_col(CD):
+    """Pseudo-inverse of a 2x1 column in closed form (differentiable); 0 for a zero column,
+    so that D = 0 (no unknown input) gives the ordinary observer."""
+    n2 = jnp.sum(CD**2)
+    nonzero = n2 > 0.0
+    return jnp.where(nonzero, CD.T / jnp.where(nonzero, n2, 1.0), 0.0)
+
+
+def uio_matrices(A, C, D, K, Y):
+    """$E, M, N, L$ of the observer (3.5) from $(A, C, D, K, Y)$.
+
+    $E = -D(CD)^+ + Y(I_2 - (CD)(CD)^+)$, $M = I_3 + E C$, $N = M A - K C$,
+    $L = K(I_2 + C E) - M A E$.
+
+    **Arguments:** `A` (3, 3), `C` (2, 3), `D` (3, 1), `K` (3, 2), `Y` (3, 2).
+
+    **Returns:** `(E, M, N, L)`, shapes (3, 2), (3, 3), (3, 3), (3, 2).
+    """
+    A, C, D, K, Y = (as_float(m) for m in (A, C, D, K, Y))
+    check_shape(A, (3, 3), "A")
+    check_shape(C, (2, 3), "C")
+    check_shape(D, (3, 1), "D")
+    check_shape(K, (3, 2), "K")
+    check_shape(Y, (3, 2), "Y")
+    CD = C @ D
+    CD_pinv = _pinv_col(CD)
+    I2 = jnp.eye(2, dtype=A.dtype)
+    E = -D @ CD_pinv + Y @ (I2 - CD @ CD_pinv)
+    M = jnp.eye(3, dtype=A.dtype) + E @ C
+    N = M @ A - K @ C
+    L = K @ (I2 + C @ E) - M @ A @ E
+    return E, M, N, L
+
+
+def uio_residuals(A, C, D, K, Y) -> dict:
+    """The conditions of chapter 3 as numbers: `MD` ($\\|MD\\|$, must be 0), `NM_LC_MA`
+    ($\\|NM + LC - MA\\|$, must be 0), `max_real_eig_N` (must be < 0: $N$ Hurwitz)."""
+    E, M, N, L = uio_matrices(A, C, D, K, Y)
+    D = as_float(D)
+    return {
+        "MD": jnp.linalg.norm(M @ D),
+        "NM_LC_MA": jnp.linalg.norm(N @ M + L @ as_float(C) - M @ as_float(A)),
+        "max_real_eig_N": jnp.max(jnp.real(jnp.linalg.eigvals(jax.lax.stop_gradient(N)))),
+    }
+
+
+def rank_condition(A, C, D, *, tol: float = 1e-9) -> bool:
+    """The rank condition (3.20) and $\\mathrm{rank}(CD) = \\mathrm{rank}(D) = 1$.
+
+    (3.20): $\\mathrm{rank}\\begin{bmatrix} sI_3 - A & D \\\\ C & 0 \\end{bmatrix} = 4$ for
+    every complex $s$. Given $\\mathrm{rank}(CD) = \\mathrm{rank}(D)$, it holds exactly when
+    $(M_0 A, C)$ is observable, $M_0 = I_3 - D(CD)^+C$ (THESIS_NOTES, ch. 3.4): the pencil can
+    lose rank only at an unobservable eigenvalue of $M_0 A$. Both are evaluated here: the
+    observability matrix, and the pencil's rank at every eigenvalue of $M_0 A$. NumPy, a
+    design-time check (not jit).
+    """
+    A, C, D = (np.asarray(m, dtype=float) for m in (A, C, D))
+    if np.linalg.matrix_rank(C @ D, tol) != 1 or np.linalg.matrix_rank(D, tol) != 1:
+        return False
+    CD = C @ D
+    M0 = np.eye(3) - D @ np.linalg.pinv(CD) @ C
+    MA = M0 @ A
+    obs = np.vstack([C, C @ MA, C @ MA @ MA])
+    if np.linalg.matrix_rank(obs, tol) < 3:
+        return False
+    for s in np.linalg.eigvals(MA):
+        pencil = np.block([[s * np.eye(3) - A, D], [C, np.zeros((2, 1))]])
+        if np.linalg.matrix_rank(pencil, tol) < 4:
+            return False
+    return True
+
+
+class UnknownInputObserver(AbstractEstimator):
+    """The nonlinear unknown input observer of eq. (3.5).
+
+    $\\dot z = N z + L y + M \\bar f(\\hat x, u) + M g(y, u)$, $\\hat x = z - E y$, with
+    $\\bar f(x, u) = f(x, u) - A x$ (eq. (3.2)) and $E, M, N, L$ from `uio_matrices`.
+    Measurements are `(y, u)`: normalized image coordinates (2,) and camera velocities (6,).
+    Output: $\\hat x$ and the point's position in the camera frame,
+    $[\\hat x_1/\\hat x_3, \\hat x_2/\\hat x_3, 1/\\hat x_3]$.
+
+    **Fields:** `A`, `C`, `D`, `K`, `Y` as in chapter 3 (`K`, `Y` are the gains; gradients
+    flow through them); `x3_guess`: the initial guess of $1/Z$ (the observer starts at
+    $\\hat x(0) = [y(0), x_{3,\\mathrm{guess}}]$).
+    """
+
+    A: Float[Array, "3 3"]
+    D: Float[Array, "3 1"]
+    K: Float[Array, "3 2"]
+    Y: Float[Array, "3 2"]
+    x3_guess: Float[Array, ""]
+    C: Float[Array, "2 3"] = eqx.field(default_factory=lambda: jnp.array(C_OUTPUT))
+
+    def __check_init__(self):
+        for name, shape in (("A", (3, 3)), ("D", (3, 1)), ("K", (3, 2)), ("Y", (3, 2))):
+            if jnp.shape(getattr(self, name)) != shape:
+                raise ValueError(
+                    f"`{name}` must have shape {shape}; got {jnp.shape(getattr(self, name))}."
+                )
+
+    def _matrices(self):
+        return uio_matrices(self.A, self.C, self.D, self.K, self.Y)
+
+    def init(self, y0):
+        y, _ = y0
+        E, _, _, _ = self._matrices()
+        x_hat = jnp.concatenate([y, jnp.reshape(self.x3_guess, (1,)).astype(y.dtype)])
+        return x_hat + E @ y  # z = x_hat + E y
+
+    def vector_field(self, t, z, meas):
+        y, u = meas
+        E, M, N, L = self._matrices()
+        x_hat = z - E @ y
+        f_bar = camera_term(x_hat, u) - self.A @ x_hat  # eq. (3.2)
+        return N @ z + L @ y + M @ f_bar + M @ known_input_term(y, u)  # eq. (3.5)
+
+    def output(self, t, z, meas):
+        y, _ = meas
+        E, _, _, _ = self._matrices()
+        x_hat = z - E @ y
+        position = jnp.stack([x_hat[0], x_hat[1], jnp.ones_like(x_hat[2])]) / x_hat[2]
+        return {"x_hat": x_hat, "position": position}
