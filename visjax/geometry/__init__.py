@@ -36,3 +36,10 @@ from ._so3 import (
     so3_log as so3_log,
     vee as vee,
 )
+from ._uncalibrated import (
+    camera_parameters as camera_parameters,
+    feature_in_camera as feature_in_camera,
+    intrinsics_eq4 as intrinsics_eq4,
+    known_feature_regressors as known_feature_regressors,
+    unknown_feature_regressors as unknown_feature_regressors,
+)
