@@ -2,6 +2,29 @@
 
 import numpy as np
 
+def _pyplot(path):
+    """matplotlib.pyplot, with the file backend when the figure goes to a file."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _finish(fig, title, path):
+    import matplotlib.pyplot as plt
+
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig
+
+
 DOF_LABELS = (
     ("$v_x$", "m/s"),
     ("$v_y$", "m/s"),
@@ -14,11 +37,7 @@ DOF_LABELS = (
 
 def plot_velocity(ts, velocity, estimate, *, title=None, path=None, max_points=2000):
     """Like Fig. 2 of seed 000: per DOF, true and estimated velocity (left), error (right)."""
-    import matplotlib
-
-    if path is not None:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot(path)
 
     ts, velocity, estimate = (np.asarray(x) for x in (ts, velocity, estimate))
     step = max(1, len(ts) // max_points)
@@ -37,23 +56,13 @@ def plot_velocity(ts, velocity, estimate, *, title=None, path=None, max_points=2
     axes[0, 1].set_title("velocity error $v - \\hat v$")
     axes[-1, 0].set_xlabel("time [s]")
     axes[-1, 1].set_xlabel("time [s]")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+    return _finish(fig, title, path)
 
 
 def plot_structure(ts, position, estimate, *, title=None, path=None):
     """Like Figs. 5-7 and 5-8 of seed 003: actual (dashed) and estimated (solid) position of
     the point in the camera frame (left), and the estimation error (right), in metres."""
-    import matplotlib
-
-    if path is not None:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot(path)
 
     ts, position, estimate = (np.asarray(x) for x in (ts, position, estimate))
     fig, axes = plt.subplots(3, 2, figsize=(10, 7), sharex=True)
@@ -75,10 +84,4 @@ def plot_structure(ts, position, estimate, *, title=None, path=None):
         err = estimate[half, i] - position[half, i]
         lim = 4 * max(np.max(np.abs(err)), 1e-4)
         axes[i, 1].set_ylim(-lim, lim)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+    return _finish(fig, title, path)
