@@ -2,6 +2,7 @@
 
 import numpy as np
 
+
 def _pyplot(path):
     """matplotlib.pyplot, with the file backend when the figure goes to a file."""
     import matplotlib
