@@ -1,5 +1,10 @@
 """The papers' observers and update laws, and the runner they share."""
 
+from ..kinematics import (
+    camera_term as camera_term,
+    known_input_term as known_input_term,
+    perspective_dynamics as perspective_dynamics,
+)
 from ._base import (
     AbstractEstimator as AbstractEstimator,
     Reducer as Reducer,
@@ -11,9 +16,6 @@ from ._base import (
 )
 from ._uio import (
     UnknownInputObserver as UnknownInputObserver,
-    camera_term as camera_term,
-    known_input_term as known_input_term,
-    perspective_dynamics as perspective_dynamics,
     rank_condition as rank_condition,
     uio_matrices as uio_matrices,
     uio_residuals as uio_residuals,

@@ -2,7 +2,7 @@
 
 A point seen by a camera on a PUMA 560 (I.1-I.4: the point is static; II.1-II.3: it moves
 on a two-link robot). The truth is the perspective dynamics (2.11) integrated with an
-8th-order solver (`visjax.estimators.perspective_dynamics`, the same function the observer
+8th-order solver (`visjax.kinematics.perspective_dynamics`, the same function the observer
 uses); the camera samples the image (pixel noise optional) and its velocities at 30 Hz, as
 in the thesis (section 5.1); the observer runs at 1 kHz on the held samples.
 
@@ -39,6 +39,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
+
+from ..kinematics import perspective_dynamics
 
 KC_TOOLBOX = ((560.98005, 0.0, 303.91196), (0.0, 749.53852, 345.99906), (0.0, 0.0, 1.0))
 KC_REFINED = ((551.9794, 0.0, 304.0282), (0.0, 737.5125, 331.5052), (0.0, 0.0, 1.0))
@@ -198,8 +200,6 @@ def moving_camera_scenario(
     - `Kc_observer`: the camera matrix the observer uses to normalize pixels.
     - `depth_cm`: the point's depth.
     """
-    from ..estimators._uio import perspective_dynamics
-
     if set_name not in SETS:
         raise ValueError(f"unknown set {set_name!r}; expected one of {list(SETS)}.")
     if noise_px > 0 and key is None:
