@@ -5,6 +5,12 @@ from ..kinematics import (
     known_input_term as known_input_term,
     perspective_dynamics as perspective_dynamics,
 )
+from ._adaptive_ls import (
+    AdaptiveStructureEstimator as AdaptiveStructureEstimator,
+    PlatformMeasurement as PlatformMeasurement,
+    pe_measure as pe_measure,
+    platform_measurements as platform_measurements,
+)
 from ._base import (
     AbstractEstimator as AbstractEstimator,
     Reducer as Reducer,

@@ -20,3 +20,7 @@ from ._planar import (
     random_planar_scenes as random_planar_scenes,
     rotation_from_vector as rotation_from_vector,
 )
+from ._uncalibrated import (
+    UncalibratedScenario as UncalibratedScenario,
+    uncalibrated_scenario as uncalibrated_scenario,
+)

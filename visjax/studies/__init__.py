@@ -1,5 +1,12 @@
 """Experiments, vmapped Monte-Carlo sweeps and gain studies."""
 
+from ._euclidean import (
+    DEFAULT_GAINS as DEFAULT_GAINS,
+    EuclideanRun as EuclideanRun,
+    euclidean_experiment as euclidean_experiment,
+    final_errors as final_errors,
+    initial_estimator as initial_estimator,
+)
 from ._structure import (
     StructureRun as StructureRun,
     observer_for as observer_for,
