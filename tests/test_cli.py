@@ -76,3 +76,13 @@ def test_structure_command(tmp_path, capsys):
     assert (tmp_path / "structure_I.1.png").stat().st_size > 20_000
     with pytest.raises(SystemExit):
         main(["structure", "--set", "III.9"])
+
+
+def test_euclidean_command(tmp_path, capsys):
+    assert main(["euclidean", "--duration", "3", "--quiet", "--out", str(tmp_path)]) == 0
+    assert "final position error" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert len(summary["final_position_error_m"]) == 4
+    assert summary["duration_s"] == 3.0 and summary["noise_px"] == 0.0
+    assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 3 s in
+    assert (tmp_path / "euclidean.png").stat().st_size > 20_000

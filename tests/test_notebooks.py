@@ -19,6 +19,11 @@ NOTEBOOKS = pathlib.Path(__file__).parents[1] / "notebooks"
             ("z1* recovered", "noise [px]"),
         ),
         ("uio_moving_camera.ipynb", {"VISJAX_NB_DURATION": "4"}, ("rank (3.20)", "toolbox K_c")),
+        (
+            "uncalibrated_structure.ipynb",
+            {"VISJAX_NB_DURATION": "3"},
+            ("final position errors", "median PE"),
+        ),
     ],
 )
 def test_notebook_executes(name, env, expect, monkeypatch):

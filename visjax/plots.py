@@ -86,3 +86,38 @@ def plot_structure(ts, position, estimate, *, title=None, path=None):
         lim = 4 * max(np.max(np.abs(err)), 1e-4)
         axes[i, 1].set_ylim(-lim, lim)
     return _finish(fig, title, path)
+
+
+def plot_euclidean(run, *, title=None, path=None):
+    """Seed 004: each unknown feature's estimated world coordinates against the truth, the
+    prediction errors of both laws (log scale), and the PE measure of eq. (49)."""
+    plt = _pyplot(path)
+    ts = np.asarray(run.ts)
+    est, true = np.asarray(run.omega_s), np.asarray(run.omega_true)
+    n = true.shape[0]
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7))
+    for c, name in enumerate("xyz"):
+        ax = axes[0, c]
+        for i in range(n):
+            ax.plot(ts, est[:, i, c], f"C{i}-", lw=1.0, label=f"feature {i + 1}")
+            ax.axhline(true[i, c], color=f"C{i}", ls="--", lw=0.8)
+        ax.set_title(f"$\\hat\\omega_{{s,{name}}}$ (solid) vs truth (dashed)")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(f"{name} [m]")
+    axes[0, 0].legend(fontsize=7)
+    err = np.linalg.norm(est - true[None], axis=-1)
+    axes[1, 0].semilogy(ts, np.maximum(err, 1e-9))
+    axes[1, 0].set_title("position error per feature [m]")
+    axes[1, 1].semilogy(
+        ts, np.maximum(np.asarray(run.p_tilde_c).max(1), 1e-9), label="known (camera law)"
+    )
+    axes[1, 1].semilogy(
+        ts, np.maximum(np.asarray(run.p_tilde_s).max(1), 1e-9), label="unknown (structure law)"
+    )
+    axes[1, 1].set_title("max prediction error [px]")
+    axes[1, 1].legend(fontsize=8)
+    axes[1, 2].plot(ts, np.asarray(run.pe))
+    axes[1, 2].set_title("PE measure of eq. (49), sliding window")
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    return _finish(fig, title, path)
