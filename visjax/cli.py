@@ -411,7 +411,7 @@ def reproduce(args) -> dict:
     (out / "summary.json").write_text(
         json.dumps({"rows": [dict(zip(("what", "value", "reference"), r)) for r in rows]}, indent=2)
     )
-    print(f"wrote {out}/ (velocity/, geometry/, summary.json)")
+    print(f"wrote {out}/ (velocity/, geometry/, structure/, euclidean/, summary.json)")
     return results
 
 
