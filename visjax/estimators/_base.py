@@ -188,31 +188,43 @@ def run(
             return one(0, state)
         return jax.lax.fori_loop(0, substeps, one, state)
 
-    def sample_step(carry, inp):
-        state, acc = carry
-        k, t0, t1, y, tr = inp
-        state = estimator.jump(state, y)
-        out = estimator.output(t0, state, y)
-        if reducer is not None:
-            acc = reducer.update(acc, k, t0, out, tr)
-        saved = None
-        if save_every is not None:
-            saved = (out, state if save_states else None)
-        return (integrate(state, t0, t1, y), acc), saved
+    def make_step(save: bool):
+        """One sample: jump, read the output (only if it is saved or reduced), integrate."""
+
+        def sample_step(carry, inp):
+            state, acc = carry
+            k, t0, t1, y, tr = inp
+            state = estimator.jump(state, y)
+            saved = None
+            if save or reducer is not None:
+                out = estimator.output(t0, state, y)
+                if reducer is not None:
+                    acc = reducer.update(acc, k, t0, out, tr)
+                if save:
+                    saved = (out, state if save_states else None)
+            return (integrate(state, t0, t1, y), acc), saved
+
+        return sample_step
 
     inputs = (ks, ts, t_next, ys, truth)
     if save_every is None or save_every == 1:
-        (state, acc), saved = jax.lax.scan(sample_step, (state, acc), inputs)
+        step = make_step(save_every is not None)
+        (state, acc), saved = jax.lax.scan(step, (state, acc), inputs)
         saved_ts = None if save_every is None else ts
     else:
-        # Nested scans: only the first sample of each chunk of `save_every` is kept.
+        # Nested scans: the first sample of each chunk of `save_every` is saved; the output
+        # of the others is not computed at all (unless a reducer needs it).
         chunked = jax.tree_util.tree_map(
             lambda x: x.reshape((n // save_every, save_every) + x.shape[1:]), inputs
         )
+        save_step, plain_step = make_step(True), make_step(False)
 
         def chunk_step(carry, chunk):
-            carry, saved = jax.lax.scan(sample_step, carry, chunk)
-            return carry, jax.tree_util.tree_map(lambda x: x[0], saved)
+            first = jax.tree_util.tree_map(lambda x: x[0], chunk)
+            rest = jax.tree_util.tree_map(lambda x: x[1:], chunk)
+            carry, saved = save_step(carry, first)
+            carry, _ = jax.lax.scan(plain_step, carry, rest)
+            return carry, saved
 
         (state, acc), saved = jax.lax.scan(chunk_step, (state, acc), chunked)
         saved_ts = ts[::save_every]
