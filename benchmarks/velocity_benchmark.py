@@ -1,6 +1,8 @@
-"""Seed-000 velocity estimator: visjax against a per-step NumPy loop, and a batch of gains.
+"""The velocity estimator of Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving
+object's velocity with a fixed camera*: visjax against a per-step NumPy loop, and a batch of
+gains.
 
-Prints JSON. The section-6 scenario, 10 s at 1 kHz (10,000 samples):
+Prints JSON. The paper's section-6 scenario, 10 s at 1 kHz (10,000 samples):
 
 - `numpy_loop_s`: `velocity_numpy_reference.numpy_velocity_estimator`, the estimator written
   per step from the paper (homography, decomposition, e, J, Euler step) in NumPy.
@@ -29,14 +31,14 @@ sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from velocity_numpy_reference import numpy_velocity_estimator  # noqa: E402
 
 from visjax.estimators import (  # noqa: E402
+    SaveAt,
     Stream,
     VelocityEstimator,
+    WindowRMS,
     run,
-    summary_rms,
     velocity_measurements,
-    window_rms_reducer,
 )
-from visjax.sim import K_EQ63, RHO_EQ63, fixed_camera_scenario  # noqa: E402
+from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario  # noqa: E402
 
 
 def timed(f, *args, repeats):
@@ -57,7 +59,7 @@ def main():
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
 
-    sc = fixed_camera_scenario(10.0, 1000.0)
+    sc = section6_scenario(10.0, 1000.0)
     n = sc.ts.shape[0]
     K, rho = jnp.array(K_EQ63), jnp.array(RHO_EQ63)
 
@@ -82,7 +84,7 @@ def main():
                 pixels[0], pc, sc.A, sc.R_star, sc.s[0], sc.z1_star, sc.n_star
             )
         )(pixels)
-        return run(VelocityEstimator(K=K, rho=rho), Stream(ts=sc.ts, ys=ys)).outputs
+        return run(VelocityEstimator(K=K, rho=rho), Stream(ts=sc.ts, ys=ys)).outputs.v_hat
 
     v_jax, one_compile, one_s = timed(one, sc.pixels, K, rho, repeats=args.repeats)
 
@@ -92,14 +94,19 @@ def main():
         )
     )(sc.pixels)
     stream = Stream(ts=sc.ts, ys=ys, truth=sc.velocity)
-    reducer = window_rms_reducer(5.0, 10.0)
+    reducer = WindowRMS(5.0, 10.0, field="v_hat")
     Ks = K * jnp.exp(0.3 * jax.random.normal(jax.random.key(0), (args.batch, 6)))
 
     @jax.jit
     def batch(Ks):
         def rms(K):
-            sol = run(VelocityEstimator(K=K, rho=rho), stream, save_every=None, reducer=reducer)
-            return summary_rms(sol.summary)
+            sol = run(
+                VelocityEstimator(K=K, rho=rho),
+                stream,
+                saveat=SaveAt(outputs=False),
+                reducer=reducer,
+            )
+            return sol.summary.rms
 
         return jax.vmap(rms)(Ks)
 

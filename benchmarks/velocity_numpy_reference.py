@@ -1,4 +1,5 @@
-"""A NumPy transcription of the seed-000 velocity estimator, one step at a time.
+"""A NumPy transcription of the velocity estimator of Chitrakaran, Dawson, Dixon, Chen,
+*Identification of a moving object's velocity with a fixed camera*, one step at a time.
 
 Written as a user would write it from the paper, with no vectorisation over time: at each
 1 kHz sample, the homography from the four point pairs (eq. (17), 8x8 DLT with g33 = 1),

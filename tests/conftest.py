@@ -1,11 +1,11 @@
 """Tests run in float64 with strict dtype promotion (no silent float32 -> float64)."""
 
 import jax
-import numpy as np
 import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
+jax.config.update("jax_numpy_rank_promotion", "raise")
 
 
 @pytest.fixture
@@ -20,10 +20,11 @@ def getkey():
     return _getkey
 
 
-def central_difference(f, x, h):
-    """Central finite-difference Jacobian of `f` at `x`, all perturbations in one vmapped call."""
-    x = np.asarray(x, dtype=np.float64)
-    E = np.eye(x.size).reshape((x.size,) + x.shape) * h
-    fb = jax.jit(jax.vmap(f))
-    d = (np.asarray(fb(x + E)) - np.asarray(fb(x - E))) / (2 * h)  # (x.size, *out)
-    return np.moveaxis(d, 0, -1).reshape(d.shape[1:] + x.shape)
+@pytest.fixture
+def no_jaxtyping():
+    """The user's view for tests of the library's own shape errors: jaxtyping's runtime
+    checks (on for the test run) off, so the `ValueError` naming the argument is tested."""
+    from tests.helpers import without_jaxtyping
+
+    with without_jaxtyping():
+        yield

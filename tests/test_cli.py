@@ -10,7 +10,6 @@ def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "visjax median" in printed and "OpenCV median" in printed
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["scenes"] == 5
     err = summary["errors"]
     # noise-free: visjax recovers ground truth to float64 precision, OpenCV to its float32
     # point conversion
@@ -32,17 +31,13 @@ def test_velocity_command(tmp_path, capsys):
     summary = json.loads((tmp_path / "summary.json").read_text())
     for key in ("rms_5_10s", "max_5_10s"):
         assert len(summary[key]) == 6
-    assert summary["rate_hz"] == 1000.0 and summary["noise_px"] == 0.0
-    assert summary["duration_s"] == 1.0
-    assert summary["window_s"] == [0.5, 1.0]
+    assert summary["window_s"] == [0.5, 1.0]  # the paper's 5-10 s, shrunk into 1 s
     assert max(summary["rms_5_10s"]) < 0.1  # noise-free: already in the chattering band
     assert abs(summary["z1_star_recovered"] - 1.99) < 1e-8
     assert (tmp_path / "velocity.png").stat().st_size > 20_000
 
 
 def test_velocity_rejects_bad_gains(capsys):
-    import pytest
-
     with pytest.raises(SystemExit):
         main(["velocity", "--K", "1 2 3"])
     assert "six positive numbers" in capsys.readouterr().err
@@ -70,7 +65,6 @@ def test_structure_command(tmp_path, capsys):
     assert "Table 5-3" in printed and "Table 5-4" in printed
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert set(summary) == {"I.1", "II.2"}
-    assert summary["I.1"]["thesis_rms"] == [0.0016, 0.0047, 0.0214]
     assert len(summary["II.2"]["rms"]) == 3
     assert max(summary["I.1"]["rms"]) < 0.05  # metres, static point, 0.1 px
     assert (tmp_path / "structure_I.1.png").stat().st_size > 20_000
@@ -83,6 +77,5 @@ def test_euclidean_command(tmp_path, capsys):
     assert "final position error" in capsys.readouterr().out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert len(summary["final_position_error_m"]) == 4
-    assert summary["duration_s"] == 3.0 and summary["noise_px"] == 0.0
     assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 3 s in
     assert (tmp_path / "euclidean.png").stat().st_size > 20_000

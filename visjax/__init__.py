@@ -4,21 +4,26 @@ The library never changes JAX's global configuration. Enable float64 yourself
 (`jax.config.update("jax_enable_x64", True)`) for the papers' accuracy; the geometry also
 runs in float32.
 
-Subpackages: `geometry` (camera, SO(3), homography, decomposition, calibration, the
-uncalibrated-camera regressors), `kinematics` (rigid-body motion), `sim` (scenarios),
-`estimators` (the runner, the velocity estimator of seed 000, the UIO of seed 003), `design`
-(the UIO's LMI, cvxpy), `frontend` (KLT tracking, OpenCV), `studies` (experiments).
+Subpackages, from the bottom layer up: `geometry` (camera, SO(3), homography,
+decomposition, calibration, the uncalibrated-camera model), `kinematics` (rigid-body motion,
+perspective dynamics), `sim` (general scene builders), `estimators` (the contract, the
+runner, the three papers' estimators), `baselines` (the same problems solved otherwise),
+`design` (the UIO's LMI, cvxpy imported lazily), `frontend` (KLT tracking, OpenCV imported
+lazily), `papers` (each paper's numbers, scenario and experiment), `studies` (generic
+studies), and the modules `report`, `plots` and `cli`.
 """
 
 from . import (
+    baselines as baselines,
     design as design,
     estimators as estimators,
     frontend as frontend,
     geometry as geometry,
     kinematics as kinematics,
+    papers as papers,
     sim as sim,
     studies as studies,
 )
 from ._results import RESULTS as RESULTS
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"

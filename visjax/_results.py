@@ -1,18 +1,24 @@
-"""Result codes shared by every visjax function that can fail on values inside jit."""
+"""Result codes shared by every visjax function that can fail on values inside jit.
 
-import equinox as eqx
+`RESULTS` extends `diffrax.RESULTS`, which extends `optimistix.RESULTS`: the codes of a
+diffrax solver step or of an optimistix solve promote into it (`RESULTS.promote(r)`) and are
+kept, never dropped.
+"""
+
+import diffrax
 
 
-class RESULTS(eqx.Enumeration):
+class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
     """Why a computation failed, for callers who asked for a result code (`throw=False`).
 
-    Functions that take `throw=True` (the default) raise an `EquinoxRuntimeError` whose
-    message is the text of the item below; with `throw=False` they return the item
-    instead, and the caller decides.
+    Functions that take `throw=True` (the default) raise a runtime error whose message is
+    the text of the item below (`equinox.EquinoxRuntimeError` outside `jax.jit`, a
+    `jax.errors.JaxRuntimeError` inside it: both are `RuntimeError`s); with `throw=False`
+    they return the item instead, and the caller decides. The return type never depends on
+    `throw`.
     """
 
-    successful = ""
-    nonfinite_input = "A measurement is not finite (NaN or inf pixel coordinates)."
+    nonfinite_pixels = "A measurement is not finite (NaN or inf pixel coordinates)."
     degenerate_points = (
         "The point correspondences are degenerate: three or more of the points are "
         "collinear or coincident, so the homography is not determined."
@@ -28,7 +34,28 @@ class RESULTS(eqx.Enumeration):
         "No homography decomposition places the reference points in front of the camera."
     )
     singular_jacobian = "The kinematics Jacobian J (seed 000, eq. (33)) is singular or not finite."
-    nonfinite_state = "The estimator state became non-finite (NaN or inf)."
+    nonfinite_state = (
+        "The estimator state became non-finite (NaN or inf); `Solution.failed_sample` is the "
+        "sample held when it happened."
+    )
+    nonfinite_measurement = (
+        "A measurement sample is not finite (NaN or inf); `Solution.failed_sample` is its "
+        "index. The run stopped there."
+    )
+    diverged = (
+        "The estimator state left its valid set (a standing assumption of its paper: a "
+        "bounded state, a positive depth estimate, a scale away from zero); "
+        "`Solution.failed_sample` is the sample held when it happened."
+    )
+    invalid_settings = (
+        "The estimator's gains or constants break an assumption of its paper (a gain that "
+        "must be positive, a bound that must be ordered, a matrix that must be Hurwitz)."
+    )
+    unstable_step = (
+        "The integration step exceeds the Euler stability bound that the estimator "
+        "declares for its gains (`max_stable_dt`): the run would diverge. Use a smaller "
+        "`dt` (the measurement is held between samples)."
+    )
 
 
 def raise_or_keep(result, x, throw: bool):

@@ -121,3 +121,39 @@ def plot_euclidean(run, *, title=None, path=None):
     for ax in axes[1]:
         ax.set_xlabel("time [s]")
     return _finish(fig, title, path)
+
+
+def plot_geometry(scenes, ours, errors, *, title=None, path=None):
+    """Chitrakaran et al., section 3: scene 0's pixels with the recovered homography's
+    transfer (left), and every scene's errors against ground truth, visjax and OpenCV."""
+    plt = _pyplot(path)
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4.5))
+    p_ref, p_cur, A = scenes.p_ref[0], scenes.p_cur[0], scenes.A[0]
+    q = np.c_[p_ref, np.ones(len(p_ref))] @ (A @ ours["H"][0] @ np.linalg.inv(A)).T
+    ax0.plot(*p_ref.T, "o", mfc="none", label="reference $p_i^*$")
+    ax0.plot(*p_cur.T, "s", mfc="none", label="current $p_i$")
+    ax0.plot(*(q[:, :2] / q[:, 2:]).T, "k+", ms=12, label="$A H A^{-1} p_i^*$ (visjax)")
+    ax0.set_xlim(0, 640)
+    ax0.set_ylim(480, 0)
+    ax0.set_aspect("equal")
+    ax0.set_title("scene 0: pixels")
+    ax0.set_xlabel("u [px]")
+    ax0.set_ylabel("v [px]")
+    ax0.legend(fontsize=8)
+    floor = 1e-17
+    for who, marker in (("visjax", "o"), ("opencv", "x")):
+        e = errors[who]
+        ax1.semilogy(
+            np.maximum(e["R_bar_deg"], floor), marker, ms=4, label=f"{who}: $\\bar R$ [deg]"
+        )
+        ax1.semilogy(
+            np.maximum(e["alpha_rel"], floor),
+            marker,
+            ms=4,
+            mfc="none",
+            label=f"{who}: $\\alpha_i$ [rel]",
+        )
+    ax1.set_xlabel("scene")
+    ax1.set_title("errors against ground truth")
+    ax1.legend(fontsize=8)
+    return _finish(fig, title, path)

@@ -5,7 +5,7 @@ import pytest
 
 from visjax.design import LMIInfeasibleError, design_uio, max_lipschitz
 from visjax.estimators import uio_residuals
-from visjax.sim import SETS
+from visjax.papers.jang import SETS
 
 C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 

@@ -1,22 +1,30 @@
 """The runner: zero-order hold, solver steps, saving, reducers, compile-once, errors."""
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from visjax import RESULTS
-from visjax.estimators import AbstractEstimator, Stream, run, summary_rms, window_rms_reducer
+from visjax.estimators import (
+    AbstractEstimator,
+    CheckpointAdjoint,
+    SaveAt,
+    Stream,
+    WindowRMS,
+    run,
+)
 
 TRACES = {"count": 0}
 
 
 class LinearObserver(AbstractEstimator):
-    """ds/dt = -a s + b y: a smooth toy estimator with a gain."""
+    """ds/dt = -a s + b y: a smooth toy estimator with a gain; Euler-stable for h < 2/a."""
 
-    a: jax.Array
-    b: jax.Array
+    a: jax.Array = eqx.field(converter=jnp.asarray)
+    b: jax.Array = eqx.field(converter=jnp.asarray)
 
     def init(self, y0):
         return jnp.zeros_like(y0)
@@ -27,6 +35,15 @@ class LinearObserver(AbstractEstimator):
 
     def output(self, t, state, y):
         return 2.0 * state
+
+    def checks(self):
+        return ((self.a > 0, "`a` must be positive."),)
+
+    def max_stable_dt(self, y):
+        return 2.0 / self.a
+
+    def valid(self, state, y):
+        return jnp.max(jnp.abs(state)) < 1e6
 
 
 class Accumulator(AbstractEstimator):
@@ -48,7 +65,7 @@ def _stream(n=200, dt=0.01, dtype=jnp.float64):
     return Stream(ts=ts, ys=ys, truth=jnp.zeros_like(ys))
 
 
-def _reference(est, stream, solver, substeps):
+def _reference(est, stream, solver, substeps=1):
     """The same zero-order hold with one diffeqsolve per sample interval."""
     ts, ys = np.asarray(stream.ts), stream.ys
     state = est.init(ys[0])
@@ -76,9 +93,11 @@ def _reference(est, stream, solver, substeps):
 def test_scan_core_matches_diffeqsolve(solver, substeps):
     est = LinearObserver(a=jnp.array(1.5), b=jnp.array([1.0, -0.5]))
     stream = _stream(60)
-    sol = run(est, stream, solver=solver, substeps=substeps)
+    sol = run(est, stream, solver=solver, dt=0.01 / substeps)
     outs, final = _reference(est, stream, solver, substeps)
-    np.testing.assert_allclose(sol.outputs, outs, rtol=1e-12, atol=1e-14)
+    # `substeps` grid points per sample interval: compare at the samples themselves
+    sol_at_samples = sol.outputs[::substeps]
+    np.testing.assert_allclose(sol_at_samples, outs, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(sol.final_state, final, rtol=1e-12, atol=1e-14)
 
 
@@ -96,52 +115,61 @@ def test_hold_uses_the_exact_sample_index(dtype):
     rtol = 1e-5 if dtype == jnp.float32 else 1e-12
     for solver in (diffrax.Euler(), diffrax.Heun(), diffrax.Tsit5()):
         # multi-stage solvers see only the held sample: same integral as Euler
-        sol = run(Accumulator(), stream, solver=solver, save_every=None)
+        sol = run(Accumulator(), stream, solver=solver, saveat=SaveAt(outputs=False))
         np.testing.assert_allclose(sol.final_state[0], expected, rtol=rtol)
 
 
 def test_saving_decimation_states_and_reducer():
-    est = LinearObserver(a=jnp.array(1.0), b=jnp.array([1.0, 2.0]))
+    est = LinearObserver(a=1.0, b=[1.0, 2.0])
     stream = _stream(200)
-    full = run(est, stream, save_states=True)
-    dec = run(est, stream, save_every=20, save_states=True)
+    full = run(est, stream, saveat=SaveAt(states=True))
+    dec = run(est, stream, saveat=SaveAt(every=20, states=True))
     np.testing.assert_allclose(dec.outputs, full.outputs[::20], rtol=1e-15)
     np.testing.assert_allclose(dec.states, full.states[::20], rtol=1e-15)
     np.testing.assert_allclose(dec.ts, stream.ts[::20])
     assert dec.outputs.shape == (10, 2)
     assert run(est, stream).states is None
-    red = window_rms_reducer(0.5, 1.5)
-    summ = run(est, stream, save_every=None, reducer=red)
-    assert summ.outputs is None
+    # a chunk that does not divide the steps: the last partial chunk is saved too
+    odd = run(est, stream, saveat=SaveAt(every=30))
+    np.testing.assert_allclose(odd.outputs, full.outputs[::30], rtol=1e-15)
+    red = WindowRMS(0.5, 1.5)
+    summ = run(est, stream, saveat=SaveAt(outputs=False), reducer=red)
+    assert summ.outputs is None and summ.ts is None
     inside = (stream.ts >= 0.5) & (stream.ts < 1.5)
     np.testing.assert_allclose(
-        summary_rms(summ.summary), np.sqrt(np.mean(full.outputs[inside] ** 2, axis=0)), rtol=1e-13
+        summ.summary.rms, np.sqrt(np.mean(full.outputs[inside] ** 2, axis=0)), rtol=1e-13
     )
-    np.testing.assert_allclose(summ.summary["max"], np.max(np.abs(full.outputs[inside]), 0))
+    np.testing.assert_allclose(summ.summary.max, np.max(np.abs(full.outputs[inside]), 0))
     np.testing.assert_allclose(summ.final_state, full.final_state, rtol=1e-15)
     # continuing from a saved state reproduces the rest of the run
-    st = run(est, Stream(ts=stream.ts[:101], ys=stream.ys[:101]), save_states=True).states[100]
-    cont = run(est, Stream(ts=stream.ts[100:], ys=stream.ys[100:]), state0=st)
+    st = run(est, Stream(ts=stream.ts[:101], ys=stream.ys[:101]), saveat=SaveAt(states=True))
+    cont = run(est, Stream(ts=stream.ts[100:], ys=stream.ys[100:]), state0=st.states[100])
     np.testing.assert_allclose(cont.outputs, full.outputs[100:], rtol=1e-14)
 
 
-def test_vmap_over_gains_and_streams_compiles_once():
+def test_new_gains_and_windows_never_recompile():
+    stream = _stream(100)
+    est = LinearObserver(a=1.0, b=[1.0, 1.0])
+    run(est, stream, reducer=WindowRMS(0.1, 0.5))
+    before = TRACES["count"]
+    run(LinearObserver(a=2.5, b=[0.5, 1.0]), stream, reducer=WindowRMS(0.2, 0.9))
+    run(LinearObserver(a=3.0, b=[0.5, 1.0]), stream, reducer=WindowRMS(0.3, 0.4))
+    assert TRACES["count"] == before  # new Python-float gains and windows reuse the compile
+
+
+def test_vmap_over_gains_and_streams_and_grad():
     stream = _stream(100)
     f = jax.jit(lambda a: run(LinearObserver(a=a, b=jnp.array([1.0, 1.0])), stream).outputs)
-    f(jnp.array(1.0))
-    before = TRACES["count"]
-    f(jnp.array(2.0))
-    assert TRACES["count"] == before  # a new gain value reuses the compiled run
     gains = jnp.linspace(0.5, 3.0, 5)
     batched = jax.vmap(f)(gains)
     for i, a in enumerate(gains):
         np.testing.assert_allclose(batched[i], f(a), rtol=1e-14)
     streams = jax.vmap(lambda s: Stream(ts=stream.ts, ys=stream.ys * s))(jnp.array([1.0, -2.0]))
-    out = jax.vmap(
-        lambda s: run(LinearObserver(a=jnp.array(1.0), b=jnp.array([1.0, 1.0])), s).outputs
-    )(streams)
+    out = jax.vmap(lambda s: run(LinearObserver(a=1.0, b=jnp.array([1.0, 1.0])), s).outputs)(
+        streams
+    )
     np.testing.assert_allclose(out[1], -2.0 * out[0], rtol=1e-13)
-    # gradient with respect to the gain, forward and reverse
+    # gradient with respect to the gain, forward and reverse, direct and checkpointed
     loss = lambda a: jnp.sum(f(a) ** 2)  # noqa: E731
     g_rev = jax.grad(loss)(jnp.array(1.0))
     g_fwd = jax.jacfwd(loss)(jnp.array(1.0))
@@ -149,17 +177,112 @@ def test_vmap_over_gains_and_streams_compiles_once():
     np.testing.assert_allclose(g_rev, fd, rtol=1e-6)
     np.testing.assert_allclose(g_fwd, g_rev, rtol=1e-12)
 
+    def loss_ckpt(a, steps):
+        sol = run(
+            LinearObserver(a=a, b=jnp.array([1.0, 1.0])),
+            stream,
+            adjoint=CheckpointAdjoint(steps),
+            saveat=SaveAt(every=3),
+        )
+        return jnp.sum(sol.outputs**2)
 
-def test_errors():
-    est = LinearObserver(a=jnp.array(1.0), b=jnp.array([1.0, 1.0]))
+    for steps in (None, 7):
+        g_ck = jax.grad(loss_ckpt)(jnp.array(1.0), steps)
+        direct = jax.grad(
+            lambda a: jnp.sum(
+                run(
+                    LinearObserver(a=a, b=jnp.array([1.0, 1.0])), stream, saveat=SaveAt(every=3)
+                ).outputs
+                ** 2
+            )
+        )(jnp.array(1.0))
+        np.testing.assert_allclose(g_ck, direct, rtol=1e-12)
+
+
+def test_errors_and_result_codes():
+    est = LinearObserver(a=1.0, b=[1.0, 1.0])
     stream = _stream(100)
-    with pytest.raises(ValueError, match="must divide"):
-        run(est, stream, save_every=7)
     with pytest.raises(ValueError, match="samples of `stream.ts` first"):
         run(est, Stream(ts=stream.ts, ys=stream.ys[:50]))
-    with pytest.raises(ValueError, match="substeps"):
-        run(est, stream, substeps=0)
+    with pytest.raises(ValueError, match="positive int"):
+        SaveAt(every=0)
+    with pytest.raises(ValueError, match="`dt` must be a positive"):
+        run(est, stream, dt=-1.0)
+    # a NaN sample: the run stops there, the state frozen at its last valid value
     bad = Stream(ts=stream.ts, ys=stream.ys.at[10, 0].set(jnp.nan))
-    with pytest.raises(Exception, match="non-finite"):
+    with pytest.raises(RuntimeError, match="measurement sample is not finite"):
         run(est, bad)
-    assert run(est, bad, throw=False).result == RESULTS.nonfinite_state
+    sol = run(est, bad, throw=False, saveat=SaveAt(states=True))
+    assert sol.result == RESULTS.nonfinite_measurement and int(sol.failed_sample) == 10
+    np.testing.assert_array_equal(sol.final_state, sol.states[10])
+    assert np.all(np.isfinite(sol.final_state))
+    good = run(est, stream)
+    assert good.result == RESULTS.successful and int(good.failed_sample) == -1
+
+
+def test_settings_and_stability_checks_under_jit_and_vmap():
+    stream = _stream(100)  # samples every 10 ms: stable for a < 200
+    with pytest.raises(ValueError, match="`a` must be positive"):
+        run(LinearObserver(a=-1.0, b=[1.0, 1.0]), stream)
+    with pytest.raises(ValueError, match="exceeds the Euler stability bound"):
+        run(LinearObserver(a=250.0, b=[1.0, 1.0]), stream)
+    run(LinearObserver(a=250.0, b=[1.0, 1.0]), stream, dt=1e-3)  # a smaller step is fine
+
+    # inside a vmapped sweep the values are traced: result codes, per element
+    def code(a):
+        sol = run(LinearObserver(a=a, b=jnp.array([1.0, 1.0])), stream, throw=False)
+        return sol.result._value, sol.failed_sample
+
+    codes, failed = jax.jit(jax.vmap(code))(jnp.array([1.0, -1.0, 250.0, 2.0]))
+    expected = [RESULTS.successful, RESULTS.invalid_settings, RESULTS.unstable_step]
+    assert [int(c) for c in codes[:3]] == [int(r._value) for r in expected]
+    assert int(codes[3]) == int(RESULTS.successful._value)
+    assert list(np.asarray(failed)) == [-1, 0, 0, -1]
+    with pytest.raises(RuntimeError, match="`a` must be positive"):
+        jax.jit(
+            jax.vmap(lambda a: run(LinearObserver(a=a, b=jnp.array([1.0, 1.0])), stream).outputs)
+        )(jnp.array([1.0, -1.0]))
+
+
+class Diverging(AbstractEstimator):
+    """ds/dt = s: leaves the valid set |s| < 10 at t = ln 10 (states start at 1)."""
+
+    def init(self, y0):
+        return jnp.ones_like(y0)
+
+    def vector_field(self, t, state, y):
+        return state
+
+    def output(self, t, state, y):
+        return state
+
+    def valid(self, state, y):
+        return jnp.max(jnp.abs(state)) < 10.0
+
+
+def test_divergence_is_a_result_code_with_the_sample():
+    stream = _stream(400, dt=0.01)
+    sol = run(Diverging(), stream, throw=False)
+    assert sol.result == RESULTS.diverged
+    # Euler: (1.01)^k >= 10 first at k = 232, reached by the step from sample 231
+    assert int(sol.failed_sample) == 231
+    assert float(jnp.max(sol.final_state)) < 10.0
+    with pytest.raises(RuntimeError, match="left its valid set"):
+        run(Diverging(), stream)
+
+
+def test_dt_holds_slow_samples():
+    """30 Hz samples under a 1 kHz law: the same as the samples repeated at 1 kHz."""
+    est = LinearObserver(a=5.0, b=[1.0, -1.0])
+    n_fast = 1000
+    fast_ts = jnp.arange(n_fast, dtype=jnp.float64) / 1000
+    held = (np.arange(n_fast) * 30) // 1000
+    first = np.searchsorted(held, np.arange(held[-1] + 1))
+    slow_ts = fast_ts[first]
+    slow_ys = jnp.stack([jnp.sin(3 * slow_ts), jnp.cos(2 * slow_ts)], axis=1)
+    slow = run(est, Stream(ts=slow_ts, ys=slow_ys), dt=1e-3, saveat=SaveAt(states=True))
+    fast = run(est, Stream(ts=fast_ts, ys=slow_ys[held]), saveat=SaveAt(states=True))
+    m = slow.states.shape[0]
+    assert m == first[-1] + 1  # the grid ends at the last sample
+    np.testing.assert_allclose(slow.states, fast.states[:m], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(slow.ts, fast_ts[:m], atol=1e-12)

@@ -4,10 +4,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from tests.conftest import central_difference
+from tests.helpers import central_difference
 from visjax.estimators import depth_from_known_length, diagonal_intersection, kinematics_jacobian
-from visjax.kinematics import integrate_pose
-from visjax.sim import fixed_camera_scenario
+from visjax.papers.chitrakaran import section6_scenario as fixed_camera_scenario
 
 
 def test_depth_and_diagonal_jit_vmap_grad():
@@ -39,17 +38,3 @@ def test_kinematics_jacobian_grad():
     np.testing.assert_allclose(
         jax.jit(jax.jacfwd(f))(x0), central_difference(f, x0, 1e-6), rtol=1e-6, atol=1e-6
     )
-
-
-def test_integrate_pose_gradient():
-    """x_f(T) = x0 + a (1 - cos T) for v = a sin t: d x_f(T) / d a = 1 - cos T."""
-    ts = jnp.linspace(0.0, 2.0, 5)
-
-    def final_x(a):
-        x, _ = integrate_pose(lambda t: a * jnp.sin(t) * jnp.ones(6), jnp.zeros(3), jnp.eye(3), ts)
-        return x[-1, 0]
-
-    np.testing.assert_allclose(final_x(0.3), 0.3 * (1 - np.cos(2.0)), rtol=1e-10)
-    np.testing.assert_allclose(jax.grad(final_x)(0.3), 1 - np.cos(2.0), rtol=1e-8)
-    xs = jax.vmap(final_x)(jnp.array([0.1, 0.2]))
-    np.testing.assert_allclose(xs, np.array([0.1, 0.2]) * (1 - np.cos(2.0)), rtol=1e-10)

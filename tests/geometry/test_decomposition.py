@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from tests.conftest import central_difference
+from tests.helpers import central_difference
 from visjax.geometry import (
     decompose_homography,
     decompose_homography_known_normal,
@@ -149,20 +149,7 @@ def test_near_pi_and_tiny_rotations():
         np.testing.assert_allclose(xk, x_h, atol=1e-12)
 
 
-def test_float32(scenes):
-    R, t, n = decompose_euclid(scenes.H.astype(np.float32))
-    assert R.dtype == jnp.float32
-    recomposed = R + t[..., :, None] * n[..., None, :]
-    np.testing.assert_allclose(recomposed, np.broadcast_to(scenes.H[:, None], R.shape), atol=2e-5)
-    Rk, xk = jax.vmap(decompose_homography_known_normal)(
-        scenes.H.astype(np.float32), scenes.n_star.astype(np.float32)
-    )
-    assert Rk.dtype == jnp.float32
-    np.testing.assert_allclose(Rk, scenes.R_bar, atol=1e-5)
-    np.testing.assert_allclose(xk, scenes.x_h, atol=1e-5)
-
-
-def test_shape_errors():
+def test_shape_errors(no_jaxtyping):
     with pytest.raises(ValueError, match=r"`H` must have shape \(3, 3\)"):
         decompose_homography(np.eye(4))
     with pytest.raises(ValueError, match=r"`K` must have shape \(3, 3\)"):

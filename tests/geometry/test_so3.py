@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from tests.conftest import central_difference
+from tests.helpers import central_difference
 from visjax.geometry import L_omega, L_omega_inv, sinc, skew, so3_exp, so3_log, vee
 
 exp_j = jax.jit(so3_exp)
@@ -129,19 +129,7 @@ def test_L_omega_inverse_and_determinant():
     np.testing.assert_allclose(np.linalg.det(L), 1.0 / np.sinc(theta / 2 / np.pi) ** 2, rtol=1e-12)
 
 
-def test_float32():
-    omegas = _random_vectors(50, seed=5).astype(np.float32)
-    R = jax.vmap(exp_j)(omegas)
-    assert R.dtype == jnp.float32
-    back = jax.vmap(log_j)(R)
-    assert back.dtype == jnp.float32
-    np.testing.assert_allclose(back, omegas, atol=3e-5)
-    L = jax.vmap(L_omega)(omegas)
-    assert L.dtype == jnp.float32
-    assert np.all(np.isfinite(jax.jacrev(so3_log)(jnp.eye(3, dtype=jnp.float32))))
-
-
-def test_shape_errors():
+def test_shape_errors(no_jaxtyping):
     with pytest.raises(ValueError, match=r"shape \(3,\)"):
         so3_exp(np.zeros(4))
     with pytest.raises(ValueError, match=r"shape \(3, 3\)"):

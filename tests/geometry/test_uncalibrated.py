@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from tests.conftest import central_difference
+from tests.helpers import central_difference
 from visjax.geometry import (
     camera_parameters,
     feature_in_camera,

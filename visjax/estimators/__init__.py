@@ -1,34 +1,44 @@
-"""The papers' observers and update laws, and the runner they share."""
+"""The papers' observers and update laws, the contract they fulfil and the runner they share."""
 
-from ..kinematics import (
-    camera_term as camera_term,
-    known_input_term as known_input_term,
-    perspective_dynamics as perspective_dynamics,
-)
 from ._adaptive_ls import (
+    AdaptiveDiagnostics as AdaptiveDiagnostics,
+    AdaptiveOutput as AdaptiveOutput,
+    AdaptiveState as AdaptiveState,
     AdaptiveStructureEstimator as AdaptiveStructureEstimator,
     PlatformMeasurement as PlatformMeasurement,
     pe_measure as pe_measure,
     platform_measurements as platform_measurements,
+    platform_stream as platform_stream,
 )
 from ._base import (
+    AbstractAdjoint as AbstractAdjoint,
     AbstractEstimator as AbstractEstimator,
-    Reducer as Reducer,
+    AbstractReducer as AbstractReducer,
+    CheckpointAdjoint as CheckpointAdjoint,
+    DirectAdjoint as DirectAdjoint,
+    SaveAt as SaveAt,
     Solution as Solution,
     Stream as Stream,
+    WindowRMS as WindowRMS,
+    WindowSummary as WindowSummary,
     run as run,
-    summary_rms as summary_rms,
-    window_rms_reducer as window_rms_reducer,
 )
 from ._uio import (
+    MovingCameraMeasurement as MovingCameraMeasurement,
+    UIOOutput as UIOOutput,
+    UIOState as UIOState,
     UnknownInputObserver as UnknownInputObserver,
+    moving_camera_stream as moving_camera_stream,
     rank_condition as rank_condition,
     uio_matrices as uio_matrices,
     uio_residuals as uio_residuals,
 )
 from ._velocity import (
+    VelocityDiagnostics as VelocityDiagnostics,
     VelocityEstimator as VelocityEstimator,
     VelocityMeasurement as VelocityMeasurement,
+    VelocityOutput as VelocityOutput,
+    VelocityState as VelocityState,
     depth_from_known_length as depth_from_known_length,
     diagonal_intersection as diagonal_intersection,
     error_signal as error_signal,

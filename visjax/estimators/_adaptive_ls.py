@@ -27,8 +27,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..geometry import known_feature_regressors, unknown_feature_regressors
-from ._base import AbstractEstimator
+from .._util import as_float, check_shape
+from ..geometry import known_feature_regressors, to_homogeneous, unknown_feature_regressors
+from ._base import AbstractEstimator, Stream
 
 
 class PlatformMeasurement(eqx.Module):
@@ -36,12 +37,12 @@ class PlatformMeasurement(eqx.Module):
     homogeneous pixels of the unknown (`p_s`, (n, 3)) and known (`p_c`, (m, 3)) features,
     and the known features' regressors `W_x` (m, 3, 12), `Pi_x` (m, 4) of eq. (12)."""
 
-    R_b: Float[Array, "3 3"]
-    x_b: Float[Array, "3"]
-    p_s: Float[Array, "n 3"]
-    p_c: Float[Array, "m 3"]
-    W_x: Float[Array, "m 3 12"]
-    Pi_x: Float[Array, "m 4"]
+    R_b: Float[Array, "*batch 3 3"]
+    x_b: Float[Array, "*batch 3"]
+    p_s: Float[Array, "*batch n 3"]
+    p_c: Float[Array, "*batch m 3"]
+    W_x: Float[Array, "*batch m 3 12"]
+    Pi_x: Float[Array, "*batch m 4"]
 
 
 def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
@@ -50,11 +51,15 @@ def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
     `R_b` (N, 3, 3), `x_b` (N, 3), pixels `p_s` (N, n, 2) and `p_c` (N, m, 2), known
     feature positions `omega_c` (m, 3).
     """
-    R_b, x_b, p_s, p_c, omega_c = (jnp.asarray(x) for x in (R_b, x_b, p_s, p_c, omega_c))
+    R_b, x_b, p_s, p_c, omega_c = (as_float(x) for x in (R_b, x_b, p_s, p_c, omega_c))
     if p_s.ndim != 3 or p_c.ndim != 3 or p_s.shape[-1] != 2 or p_c.shape[-1] != 2:
         raise ValueError(
             f"`p_s` and `p_c` must be (N, n, 2) and (N, m, 2); got {p_s.shape}, {p_c.shape}."
         )
+    n = p_s.shape[0]
+    check_shape(R_b, (n, 3, 3), "R_b")
+    check_shape(x_b, (n, 3), "x_b")
+    check_shape(p_c, (n, None, 2), "p_c")
     if p_c.shape[1] != omega_c.shape[0]:
         raise ValueError(
             f"`p_c` has {p_c.shape[1]} known features but `omega_c` has {omega_c.shape[0]}."
@@ -65,8 +70,48 @@ def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
         return W, Pi[:, 0, :]
 
     W_x, Pi_x = jax.vmap(one)(R_b, x_b)
-    hom = lambda p: jnp.concatenate([p, jnp.ones(p.shape[:-1] + (1,), p.dtype)], -1)  # noqa: E731
-    return PlatformMeasurement(R_b=R_b, x_b=x_b, p_s=hom(p_s), p_c=hom(p_c), W_x=W_x, Pi_x=Pi_x)
+    return PlatformMeasurement(
+        R_b=R_b, x_b=x_b, p_s=to_homogeneous(p_s), p_c=to_homogeneous(p_c), W_x=W_x, Pi_x=Pi_x
+    )
+
+
+def platform_stream(ts, R_b, x_b, p_s, p_c, omega_c, *, truth=None) -> Stream:
+    """The measurement `Stream` of `AdaptiveStructureEstimator` from raw measurements.
+
+    **Arguments:** `ts` (N,) the sample times (any rate; `run(..., dt=...)` holds the
+    samples); the measured platform pose `R_b` (N, 3, 3), `x_b` (N, 3) in the world frame;
+    the pixels of the unknown (`p_s`, (N, n, 2)) and known (`p_c`, (N, m, 2)) features; the
+    known features' world positions `omega_c` (m, 3); `truth` for a reducer.
+    """
+    ts = as_float(ts)
+    check_shape(ts, (None,), "ts")
+    ys = platform_measurements(R_b, x_b, p_s, p_c, omega_c)
+    if ys.p_s.shape[0] != ts.shape[0]:
+        raise ValueError(f"`ts` has {ts.shape[0]} samples but the pixels have {ys.p_s.shape[0]}.")
+    return Stream(ts=ts, ys=ys, truth=truth)
+
+
+def _ls_step_bound(rate, alpha, depth, amplification=1e3, steps=512):
+    """The largest Euler step of a least-squares law whose transient amplification stays
+    below `amplification`.
+
+    Along the fastest direction the law is $\\dot{\\tilde\\theta} = -r_k\\tilde\\theta$ with
+    $r_k = r_0 / (1 + g k)$: the gain $\\Gamma$ decays as the information $\\Gamma^{-1}$ grows
+    by $2hW^TW$ per step (eqs. (39), (45)), $g = 2 h r_0 \\bar z / \\alpha$ ($\\bar z$ the mean
+    predicted depth). A step above the plain bound $2/r_0$ therefore only amplifies the
+    error for the first steps after a start or a reset, by $\\prod_k \\max(1, |1 - h r_k|)$;
+    with $\\alpha_c = 100$ at 1 ms that is about 40, with $\\alpha_c = 300$ about 1e20. The
+    bound is the largest step, on a log grid from 1 us to 1 s, below `amplification`.
+    """
+    h = jnp.logspace(-6.0, 0.0, 241, dtype=jnp.result_type(rate))
+    k = jnp.arange(steps, dtype=h.dtype)
+    g = 2.0 * h * rate * depth / alpha
+    r_k = rate / (1.0 + g[:, None] * k[None, :])
+    log_growth = jnp.sum(jnp.log(jnp.maximum(1.0, jnp.abs(1.0 - h[:, None] * r_k))), axis=1)
+    # still growing after `steps` steps: never settles
+    settles = h * r_k[:, -1] <= 2.0
+    ok = (log_growth <= jnp.log(amplification)) & settles
+    return jnp.max(jnp.where(ok, h, 0.0))
 
 
 def _project(tau, theta, normals, margin, Gamma):
@@ -79,33 +124,81 @@ def _project(tau, theta, normals, margin, Gamma):
     return tau
 
 
+class AdaptiveState(eqx.Module):
+    """The state of the two laws: `theta_c` (16,) the camera parameters; `info_c` (16, 16)
+    $\\Gamma_\\varphi^{-1}$ (normalised, see the module docstring); `theta_s` (n, 4) the
+    structure parameters; `info_s` (n, 4, 4) the diagonal blocks of $\\Gamma^{-1}$ (eq. (45):
+    $\\bar W_s$ is block diagonal, eq. (22)); `resets` the number of covariance resets."""
+
+    theta_c: Float[Array, "16"]
+    info_c: Float[Array, "16 16"]
+    theta_s: Float[Array, "n 4"]
+    info_s: Float[Array, "n 4 4"]
+    resets: Float[Array, ""]
+
+
+class AdaptiveOutput(eqx.Module):
+    """The unknown features' world positions, scale recovered (eqs. (50)-(51))."""
+
+    omega_s: Float[Array, "n 3"]
+
+
+class AdaptiveDiagnostics(eqx.Module):
+    """Prediction errors (px) of the known (`p_tilde_c`) and unknown (`p_tilde_s`)
+    features; predicted depths `depth_s`, `depth_c`; the minimum eigenvalue of
+    $\\Gamma_\\varphi$; the reset count; `theta_c`; `info_rate_s` (n, 4, 4), the integrand
+    $\\bar W_{si}^T\\bar W_{si}$ of eq. (49)."""
+
+    p_tilde_c: Float[Array, " m"]
+    p_tilde_s: Float[Array, " n"]
+    depth_s: Float[Array, " n"]
+    depth_c: Float[Array, " m"]
+    lambda_min_gamma_c: Float[Array, ""]
+    resets: Float[Array, ""]
+    theta_c: Float[Array, "16"]
+    info_rate_s: Float[Array, "n 4 4"]
+
+
 class AdaptiveStructureEstimator(AbstractEstimator):
     """Seed 004: camera-parameter law (37)-(39) and structure law (41)-(45), output (50)-(51).
-
-    **State:** `(theta_c (16,), info_c (16, 16), theta_s (n, 4), info_s (n, 4, 4), resets)`,
-    with `info_c` $= \\Gamma_\\varphi^{-1}$ (normalised, see the module docstring), `info_s`
-    the diagonal blocks of $\\Gamma^{-1}$ (eq. (45): $\\bar W_s$ is block diagonal, eq. (22)),
-    and `resets` the number of covariance resets so far.
 
     **Fields:** `alpha_c`, `alpha`: the gains of eqs. (38) and (42) (positive constants
     here: $1 + \\bar\\rho/\\bar\\varepsilon$ with constant bounds); `eta0 > eta1 > 0` of eq. (39);
     `gamma_s0`: the initial structure covariance $\\Gamma(t_0) = \\gamma_{s0} I$; `D` (16,) the
     scale of each camera parameter; `eps_c`, `eps_s`: the projection margins on the
-    predicted depths (metres); `theta_c0` (16,), `theta_s0` (n, 4): initial estimates.
+    predicted depths (metres); `theta_c0` (16,), `theta_s0` (n, 4): initial estimates;
+    `scale_min`: the scale entries $\\hat\\lambda_i$ of eq. (50) must stay above it in
+    magnitude (default 1e-6).
+
+    Checks (under `jit` and `vmap`): every gain, `D` and the margins positive,
+    $\\eta_0 > \\eta_1 > 0$. Valid state: every predicted depth above half its projection
+    margin (the projection keeps it above the margin up to one Euler step), every scale
+    entry away from zero. Euler stability: near the estimate both laws are gradient flows,
+    $\\dot{\\tilde\\theta} \\approx -\\alpha\\Gamma W^T \\Lambda^{-1} W\\tilde\\theta$
+    ($\\Lambda$ the predicted depths), fastest at $\\Gamma_\\varphi = \\eta_0 I$ and
+    $\\Gamma = \\gamma_{s0} I$, and decaying as information accumulates: `max_stable_dt(y)`
+    is the largest step whose transient amplification stays below 1e3 (`_ls_step_bound`),
+    at the sample `y` and the initial estimates.
     """
 
-    alpha_c: Float[Array, ""]
-    alpha: Float[Array, ""]
-    eta0: Float[Array, ""]
-    eta1: Float[Array, ""]
-    gamma_s0: Float[Array, ""]
-    D: Float[Array, "16"]
-    eps_c: Float[Array, ""]
-    eps_s: Float[Array, ""]
-    theta_c0: Float[Array, "16"]
-    theta_s0: Float[Array, "n 4"]
+    alpha_c: Float[Array, ""] = eqx.field(converter=as_float)
+    alpha: Float[Array, ""] = eqx.field(converter=as_float)
+    eta0: Float[Array, ""] = eqx.field(converter=as_float)
+    eta1: Float[Array, ""] = eqx.field(converter=as_float)
+    gamma_s0: Float[Array, ""] = eqx.field(converter=as_float)
+    D: Float[Array, "16"] = eqx.field(converter=as_float)
+    eps_c: Float[Array, ""] = eqx.field(converter=as_float)
+    eps_s: Float[Array, ""] = eqx.field(converter=as_float)
+    theta_c0: Float[Array, "16"] = eqx.field(converter=as_float)
+    theta_s0: Float[Array, "n 4"] = eqx.field(converter=as_float)
+    scale_min: Float[Array, ""] = eqx.field(converter=as_float, default=1e-6)
 
     def __check_init__(self):
+        for name in ("alpha_c", "alpha", "eta0", "eta1", "gamma_s0", "eps_c", "eps_s"):
+            if jnp.shape(getattr(self, name)) != ():
+                raise ValueError(
+                    f"`{name}` must be a scalar; got shape {jnp.shape(getattr(self, name))}."
+                )
         if jnp.shape(self.theta_c0) != (16,) or jnp.shape(self.D) != (16,):
             raise ValueError(
                 f"`theta_c0` and `D` must have shape (16,); got {jnp.shape(self.theta_c0)} "
@@ -113,24 +206,43 @@ class AdaptiveStructureEstimator(AbstractEstimator):
             )
         if jnp.ndim(self.theta_s0) != 2 or jnp.shape(self.theta_s0)[1] != 4:
             raise ValueError(f"`theta_s0` must have shape (n, 4); got {jnp.shape(self.theta_s0)}.")
-        if not isinstance(self.eta0, jax.core.Tracer) and not isinstance(
-            self.eta1, jax.core.Tracer
-        ):
-            if not float(self.eta0) > float(self.eta1) > 0:
-                raise ValueError(f"need eta0 > eta1 > 0 (eq. (39)); got {self.eta0}, {self.eta1}.")
 
-    def init(self, y0: PlatformMeasurement):
+    def checks(self):
+        return (
+            (self.alpha_c > 0, "`alpha_c` must be positive (eq. (38))."),
+            (self.alpha > 0, "`alpha` must be positive (eq. (42))."),
+            (
+                (self.eta0 > self.eta1) & (self.eta1 > 0),
+                "need eta0 > eta1 > 0 (eq. (39)).",
+            ),
+            (self.gamma_s0 > 0, "`gamma_s0` must be positive: Gamma(t0) > 0 (eq. (45))."),
+            (jnp.all(self.D > 0), "`D`, the scale of each camera parameter, must be positive."),
+            (
+                (self.eps_c > 0) & (self.eps_s > 0),
+                "the projection margins `eps_c`, `eps_s` must be positive.",
+            ),
+            (self.scale_min >= 0, "`scale_min` must be non-negative."),
+        )
+
+    def init(self, y0: PlatformMeasurement) -> AdaptiveState:
         dtype = y0.p_s.dtype
         n = self.theta_s0.shape[0]
         info_c = jnp.eye(16, dtype=dtype) / self.eta0  # Gamma_phi(t0) = eta0 I
         info_s = jnp.broadcast_to(jnp.eye(4, dtype=dtype) / self.gamma_s0, (n, 4, 4))
-        return (self.theta_c0, info_c, self.theta_s0, info_s, jnp.zeros((), dtype))
+        return AdaptiveState(
+            theta_c=self.theta_c0,
+            info_c=info_c,
+            theta_s=self.theta_s0,
+            info_s=info_s,
+            resets=jnp.zeros((), dtype),
+        )
 
-    def _signals(self, state, y: PlatformMeasurement):
-        theta_c, info_c, theta_s, info_s, _ = state
+    def _signals(self, state: AdaptiveState, y: PlatformMeasurement):
+        theta_c, theta_s = state.theta_c, state.theta_s
         t1, t2 = theta_c[:12], theta_c[12:]
         # known features: eqs. (30)-(36)
-        p_hat_c = (y.W_x @ t1) / (y.Pi_x @ t2)[:, None]
+        depth_c = y.Pi_x @ t2
+        p_hat_c = (y.W_x @ t1) / depth_c[:, None]
         p_tilde_c = y.p_c - p_hat_c
         Pi_x = -(p_hat_c[:, :, None] * y.Pi_x[:, None, :])  # eq. (33)
         W_c = jnp.concatenate([y.W_x, Pi_x], axis=-1).reshape(-1, 16)  # eq. (36)
@@ -140,12 +252,24 @@ class AdaptiveStructureEstimator(AbstractEstimator):
         p_hat_s = (theta_s @ W.T) / depth_s[:, None]
         p_tilde_s = y.p_s - p_hat_s
         W_bar = W[None, :, :] - p_hat_s[:, :, None] * Pi[None, :, :]  # blocks of eq. (22)
-        return p_tilde_c, W_c, p_tilde_s, W_bar, Pi[0]
+        return p_tilde_c, W_c, p_tilde_s, W_bar, Pi[0], depth_c, depth_s
 
-    def vector_field(self, t, state, y: PlatformMeasurement):
-        theta_c, info_c, theta_s, info_s, _ = state
-        p_tilde_c, W_c, p_tilde_s, W_bar, Pi_hat = self._signals(state, y)
-        WD = W_c * self.D
+    def max_stable_dt(self, y: PlatformMeasurement):
+        state = self.init(y)
+        _, W_c, _, W_bar, _, depth_c, depth_s = self._signals(state, y)
+        WD = W_c * self.D[None, :]
+        weights = jnp.repeat(1.0 / depth_c, 3)
+        rate_c = self.alpha_c * self.eta0 * jnp.linalg.eigvalsh(WD.T @ (WD * weights[:, None]))
+        info = jnp.einsum("nki,nkj->nij", W_bar, W_bar) / depth_s[:, None, None]
+        rate_s = self.alpha * self.gamma_s0 * jnp.linalg.eigvalsh(info)[:, -1]
+        bound_c = _ls_step_bound(rate_c[-1], self.alpha_c, jnp.mean(depth_c))
+        bound_s = _ls_step_bound(jnp.max(rate_s), self.alpha, jnp.mean(depth_s))
+        return jax.lax.stop_gradient(jnp.minimum(bound_c, bound_s))
+
+    def vector_field(self, t, state: AdaptiveState, y: PlatformMeasurement) -> AdaptiveState:
+        theta_c, info_c, theta_s, info_s = state.theta_c, state.info_c, state.theta_s, state.info_s
+        p_tilde_c, W_c, p_tilde_s, W_bar, Pi_hat, _, _ = self._signals(state, y)
+        WD = W_c * self.D[None, :]
         Gamma_phi = jnp.linalg.inv(info_c)
         Gamma_c = self.D[:, None] * Gamma_phi * self.D[None, :]
         tau_c = self.alpha_c * Gamma_c @ (W_c.T @ p_tilde_c.reshape(-1))  # eq. (37)
@@ -160,32 +284,54 @@ class AdaptiveStructureEstimator(AbstractEstimator):
             tau_s, theta_s, Gamma_s
         )
         d_info_s = 2.0 * jnp.einsum("nki,nkj->nij", W_bar, W_bar)  # eq. (45)
-        return (tau_c, d_info_c, tau_s, d_info_s, jnp.zeros_like(state[4]))
+        return AdaptiveState(
+            theta_c=tau_c,
+            info_c=d_info_c,
+            theta_s=tau_s,
+            info_s=d_info_s,
+            resets=jnp.zeros_like(state.resets),
+        )
 
-    def jump(self, state, y):
+    def jump(self, state: AdaptiveState, y) -> AdaptiveState:
         """Covariance resetting of eq. (39): $\\Gamma_\\varphi \\to \\eta_0 I$ when its minimum
         eigenvalue reaches $\\eta_1$ (the largest eigenvalue of `info_c` reaches $1/\\eta_1$)."""
-        theta_c, info_c, theta_s, info_s, resets = state
-        lam_max = jnp.linalg.eigvalsh(jax.lax.stop_gradient(info_c))[-1]
+        lam_max = jnp.linalg.eigvalsh(jax.lax.stop_gradient(state.info_c))[-1]
         reset = lam_max >= 1.0 / self.eta1
-        info_c = jnp.where(reset, jnp.eye(16, dtype=info_c.dtype) / self.eta0, info_c)
-        return (theta_c, info_c, theta_s, info_s, resets + reset.astype(resets.dtype))
+        info_c = jnp.where(reset, jnp.eye(16, dtype=state.info_c.dtype) / self.eta0, state.info_c)
+        return eqx.tree_at(
+            lambda s: (s.info_c, s.resets),
+            state,
+            (info_c, state.resets + reset.astype(state.resets.dtype)),
+        )
 
-    def output(self, t, state, y):
-        theta_c, info_c, theta_s, info_s, resets = state
-        p_tilde_c, _, p_tilde_s, W_bar, Pi_hat = self._signals(state, y)
+    def output(self, t, state: AdaptiveState, y) -> AdaptiveOutput:
+        theta_s = state.theta_s
         lam = theta_s[:, 3]  # eq. (50)
-        return {
-            "omega_s": theta_s[:, :3] / lam[:, None],  # eq. (51)
-            "p_tilde_c": jnp.linalg.norm(p_tilde_c[:, :2], axis=-1),
-            "p_tilde_s": jnp.linalg.norm(p_tilde_s[:, :2], axis=-1),
-            "depth_s": theta_s @ Pi_hat,
-            "depth_c": y.Pi_x @ theta_c[12:],
-            "lambda_min_gamma_c": 1.0 / jnp.linalg.eigvalsh(jax.lax.stop_gradient(info_c))[-1],
-            "resets": resets,
-            "theta_c": theta_c,
-            "info_rate_s": jnp.einsum("nki,nkj->nij", W_bar, W_bar),  # integrand of (49)
-        }
+        return AdaptiveOutput(omega_s=theta_s[:, :3] / lam[:, None])  # eq. (51)
+
+    def diagnostics(self, t, state: AdaptiveState, y) -> AdaptiveDiagnostics:
+        p_tilde_c, _, p_tilde_s, W_bar, _, depth_c, depth_s = self._signals(state, y)
+        lam = jnp.linalg.eigvalsh(jax.lax.stop_gradient(state.info_c))[-1]
+        return AdaptiveDiagnostics(
+            p_tilde_c=jnp.linalg.norm(p_tilde_c[:, :2], axis=-1),
+            p_tilde_s=jnp.linalg.norm(p_tilde_s[:, :2], axis=-1),
+            depth_s=depth_s,
+            depth_c=depth_c,
+            lambda_min_gamma_c=1.0 / lam,
+            resets=state.resets,
+            theta_c=state.theta_c,
+            info_rate_s=jnp.einsum("nki,nkj->nij", W_bar, W_bar),  # integrand of (49)
+        )
+
+    def valid(self, state: AdaptiveState, y: PlatformMeasurement):
+        depth_c = y.Pi_x @ state.theta_c[12:]
+        _, Pi = unknown_feature_regressors(y.R_b, y.x_b, state.theta_c[:12], state.theta_c[12:])
+        depth_s = state.theta_s @ Pi[0]
+        return (
+            jnp.all(depth_c > 0.5 * self.eps_c)
+            & jnp.all(depth_s > 0.5 * self.eps_s)
+            & jnp.all(jnp.abs(state.theta_s[:, 3]) > self.scale_min)
+        )
 
 
 def pe_measure(info_rate_s, ts, window: float):

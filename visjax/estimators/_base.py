@@ -1,50 +1,85 @@
 """The estimator contract and the one runner that serves every estimator.
 
-An estimator is a final `eqx.Module` whose fields are its gains and constants. It has
-`init(y0)`, `vector_field(t, state, y)`, `output(t, state, y)` and optionally
-`jump(state, y)`. `run` integrates each sample interval with a diffrax solver under a
-zero-order hold of the measurement, applies the jumps at sample instants, and returns a
-`Solution`.
+An estimator is a final `eqx.Module` whose fields are its gains and constants (arrays, so
+that a new value never recompiles). It has `init(y0)`, `vector_field(t, state, y)`,
+`output(t, state, y)`, and optionally `diagnostics`, `jump`, `valid`, `checks` and
+`max_stable_dt`. `run` integrates it on a time grid of its own (`dt`), holds each
+measurement sample from its arrival to the next (zero-order hold), fires `jump` when a new
+sample arrives, checks the state after every step, and returns a `Solution` that always
+carries a result code.
 """
 
-import abc
-from collections.abc import Callable
-from typing import Any
+import math
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, PyTree
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int, PyTree
 
-from .._results import RESULTS, raise_or_keep
+from .._results import RESULTS
 
 
 class AbstractEstimator(eqx.Module):
     """The contract every visjax estimator fulfils (see DESIGN.md).
 
-    - `init(y0) -> state`: the initial state (a pytree) from the first measurement.
-    - `vector_field(t, state, y) -> dstate`: the continuous-time law, `y` being the
-      measurement held since the last sample.
-    - `output(t, state, y) -> estimate`: what the user reads.
-    - `jump(state, y) -> state`: discrete events at sample instants; identity by default.
+    Required:
+
+    - `init(y0) -> State`: the initial state (a typed `eqx.Module`) from the first sample.
+    - `vector_field(t, state, y) -> State`: the continuous-time law, `y` being the sample
+        held since it arrived.
+    - `output(t, state, y) -> Output`: what the user reads (a typed `eqx.Module`).
+
+    Optional (the defaults say "nothing to add"):
+
+    - `diagnostics(t, state, y)`: internal signals, saved only on request; default `None`.
+    - `jump(state, y) -> State`: a discrete update when a new sample arrives (covariance
+        resetting, a filter update); default identity.
+    - `valid(state, y) -> bool`: the paper's standing assumptions on the state (bounded,
+        positive depth estimate, ...). The runner checks it after every step and turns a
+        violation into `RESULTS.diverged`. Default: always valid (finiteness is checked
+        for every estimator anyway).
+    - `checks() -> tuple[(bool array, message), ...]`: conditions on the gains and
+        constants (positive gains, ordered bounds, a Hurwitz matrix). Checked by the
+        runner under `jit` and `vmap` (`RESULTS.invalid_settings`, or an error naming the
+        condition). Default: none.
+    - `max_stable_dt(y) -> float array`: the largest Euler step that is stable for the
+        gains (evaluated at the first sample); the runner refuses a larger step.
+        Default: `inf`.
     """
 
-    @abc.abstractmethod
     def init(self, y0: PyTree) -> PyTree:
         """The initial state from the first measurement."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def vector_field(self, t: Float[Array, ""], state: PyTree, y: PyTree) -> PyTree:
         """The time derivative of the state under the held measurement `y`."""
+        raise NotImplementedError
 
-    @abc.abstractmethod
     def output(self, t: Float[Array, ""], state: PyTree, y: PyTree) -> PyTree:
         """The estimate the user reads."""
+        raise NotImplementedError
+
+    def diagnostics(self, t: Float[Array, ""], state: PyTree, y: PyTree) -> PyTree:
+        """Internal signals for plots and studies (default: none)."""
+        return None
 
     def jump(self, state: PyTree, y: PyTree) -> PyTree:
         """A discrete update applied when the sample `y` arrives (default: none)."""
         return state
+
+    def valid(self, state: PyTree, y: PyTree) -> Bool[Array, ""]:
+        """Whether `state` satisfies the estimator's standing assumptions (default: yes)."""
+        return jnp.array(True)
+
+    def checks(self) -> tuple[tuple[Bool[Array, ""], str], ...]:
+        """Conditions on the gains and constants, each with the message of its violation."""
+        return ()
+
+    def max_stable_dt(self, y: PyTree) -> Float[Array, ""]:
+        """The largest stable Euler step for these gains (default: no bound)."""
+        return jnp.array(jnp.inf)
 
 
 class Stream(eqx.Module):
@@ -52,7 +87,7 @@ class Stream(eqx.Module):
 
     **Fields:**
 
-    - `ts`: sample times, shape (N,), increasing.
+    - `ts`: sample times, shape (N,), increasing (any rate, not necessarily uniform).
     - `ys`: the measurements the estimator sees, a pytree of arrays of leading size N.
     - `truth`: optional ground truth of leading size N, never shown to the estimator; a
         `reducer` of `run` receives it (to accumulate errors without saving outputs).
@@ -63,45 +98,146 @@ class Stream(eqx.Module):
     truth: PyTree = None
 
 
-class Solution(eqx.Module):
-    """What `run` returns.
+class SaveAt(eqx.Module):
+    """What `run` saves, and how often (a Module: a new value of a window never recompiles).
 
     **Fields:**
 
-    - `ts`: the saved sample times (every `save_every`-th), or `None`.
-    - `outputs`: `estimator.output` at the saved samples (after that sample's jump), or `None`.
-    - `states`: the states at the saved samples, if `save_states=True`, else `None`.
-    - `final_state`: the state after the last sample.
+    - `every`: save at every `every`-th integration step (from the first). Static: a new
+        value changes the saved shapes.
+    - `outputs`, `diagnostics`, `states`: which signals to save. With none of them, only
+        the final state (and a reducer's summary) come back. Saving a batch costs
+        B x (saved steps) x d x 8 bytes.
+    """
+
+    every: int = eqx.field(default=1, static=True)
+    outputs: bool = eqx.field(default=True, static=True)
+    diagnostics: bool = eqx.field(default=False, static=True)
+    states: bool = eqx.field(default=False, static=True)
+
+    def __check_init__(self):
+        if not (isinstance(self.every, int) and self.every >= 1):
+            raise ValueError(f"`SaveAt.every` must be a positive int; got {self.every!r}.")
+
+    @property
+    def any(self) -> bool:
+        return self.outputs or self.diagnostics or self.states
+
+
+class AbstractReducer(eqx.Module):
+    """Accumulates a summary over every integration step without storing the steps.
+
+    `init(output0, truth0) -> acc` and `update(acc, t, output, truth) -> acc`; `truth` is
+    the stream's ground truth of the sample held at that step.
+    """
+
+    def init(self, output0: PyTree, truth0: PyTree) -> PyTree:
+        raise NotImplementedError
+
+    def update(self, acc: PyTree, t: Float[Array, ""], output: PyTree, truth: PyTree) -> PyTree:
+        raise NotImplementedError
+
+
+class WindowSummary(eqx.Module):
+    """The sum of squares, the max-abs and the count of an error over a time window."""
+
+    sumsq: Array
+    max: Array
+    count: Array
+
+    @property
+    def rms(self) -> Array:
+        """The RMS per component (batched or not); NaN for an empty window."""
+        count = jnp.where(self.count > 0, self.count, jnp.nan)
+        return jnp.sqrt(self.sumsq / count[..., None])
+
+
+class WindowRMS(AbstractReducer):
+    """RMS and max-abs of `output.<field> - truth` over `t_start <= t < t_end`.
+
+    **Fields:** `t_start`, `t_end` (arrays: a new window reuses the compiled run); `field`
+    the name of the output's field to compare (`None`: the output itself is an array).
+    """
+
+    t_start: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    t_end: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    field: str | None = eqx.field(default=None, static=True)
+
+    def _error(self, output, truth):
+        value = output if self.field is None else getattr(output, self.field)
+        return value - truth
+
+    def init(self, output0, truth0) -> WindowSummary:
+        e = self._error(output0, truth0)
+        z = jnp.zeros_like(e)
+        return WindowSummary(sumsq=z, max=z, count=jnp.zeros((), e.dtype))
+
+    def update(self, acc: WindowSummary, t, output, truth) -> WindowSummary:
+        e = self._error(output, truth)
+        inside = (t >= self.t_start) & (t < self.t_end)
+        return WindowSummary(
+            sumsq=acc.sumsq + jnp.where(inside, e**2, 0.0),
+            max=jnp.where(inside, jnp.maximum(acc.max, jnp.abs(e)), acc.max),
+            count=acc.count + jnp.where(inside, 1.0, 0.0),
+        )
+
+
+class AbstractAdjoint(eqx.Module):
+    """How reverse-mode differentiation through `run` stores the trajectory."""
+
+
+class DirectAdjoint(AbstractAdjoint):
+    """Store every step's residuals: fastest; reverse-mode memory grows with the steps."""
+
+
+class CheckpointAdjoint(AbstractAdjoint):
+    """Checkpoint every `steps` integration steps (default: about the square root of the
+    number of steps): reverse mode stores one state per checkpoint and recomputes one
+    segment at a time, so its memory grows like the square root of the trajectory's
+    length, for about one extra forward pass. Forward mode (`jax.jacfwd`) needs neither
+    and is the fast path for a handful of gains."""
+
+    steps: int | None = eqx.field(default=None, static=True)
+
+    def __check_init__(self):
+        if self.steps is not None and not (isinstance(self.steps, int) and self.steps >= 1):
+            raise ValueError(
+                f"`CheckpointAdjoint.steps` must be a positive int; got {self.steps!r}."
+            )
+
+
+class Solution(eqx.Module):
+    """What `run` returns (whatever `throw` says).
+
+    **Fields:**
+
+    - `ts`: the saved step times, or `None` if nothing is saved.
+    - `outputs`, `diagnostics`, `states`: `estimator.output`, `.diagnostics` and the state
+        at the saved steps (after that step's jump), each `None` unless asked for.
+    - `final_state`: the state at the end (the last valid state if the run failed).
     - `summary`: the reducer's accumulator, if a reducer was given, else `None`.
-    - `result`: a `RESULTS` item, `successful` unless the state became non-finite.
+    - `result`: a `RESULTS` item: `successful`, or why the run failed.
+    - `failed_sample`: the index of the stream sample held when the run failed, -1 if it
+        did not. After a failure the state is frozen at its last valid value.
     """
 
     ts: Float[Array, " M"] | None
     outputs: PyTree
+    diagnostics: PyTree
     states: PyTree
     final_state: PyTree
     summary: PyTree
     result: RESULTS
+    failed_sample: Int[Array, ""]
 
 
-class Reducer(eqx.Module):
-    """Accumulates a summary over all samples without storing them.
-
-    `init(output0, truth0) -> acc` and `update(acc, k, t, output, truth) -> acc` are plain
-    callables (fields), so a reducer is a pytree and jits with the runner.
-    """
-
-    init: Callable[[PyTree, PyTree], PyTree]
-    update: Callable[[PyTree, Array, Array, PyTree, PyTree], PyTree]
-
-
-def _check_stream(stream: Stream, save_every, substeps):
+def _check_stream(stream: Stream) -> int:
     if not isinstance(stream, Stream):
         raise ValueError(f"`stream` must be a visjax Stream; got {type(stream).__name__}.")
     ts = stream.ts
-    if jnp.ndim(ts) != 1 or ts.shape[0] < 2:
+    if jnp.ndim(ts) != 1 or jnp.shape(ts)[0] < 2:
         raise ValueError(f"`stream.ts` must have shape (N,) with N >= 2; got {jnp.shape(ts)}.")
-    n = ts.shape[0]
+    n = jnp.shape(ts)[0]
     for name, tree in (("ys", stream.ys), ("truth", stream.truth)):
         for leaf in jax.tree_util.tree_leaves(tree):
             if jnp.ndim(leaf) < 1 or jnp.shape(leaf)[0] != n:
@@ -109,175 +245,285 @@ def _check_stream(stream: Stream, save_every, substeps):
                     f"every leaf of `stream.{name}` must have the {n} samples of `stream.ts` "
                     f"first; got a leaf of shape {jnp.shape(leaf)}."
                 )
-    if not (isinstance(substeps, int) and substeps >= 1):
-        raise ValueError(f"`substeps` must be a positive int; got {substeps!r}.")
-    if save_every is not None:
-        if not (isinstance(save_every, int) and save_every >= 1):
-            raise ValueError(f"`save_every` must be a positive int or None; got {save_every!r}.")
-        if n % save_every != 0:
-            raise ValueError(
-                f"`save_every` ({save_every}) must divide the number of samples ({n})."
-            )
     return n
 
 
-@eqx.filter_jit
+def _concrete(x):
+    """`x` as a NumPy value if it is concrete (not traced), else `None`."""
+    try:
+        return np.asarray(x)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return None
+
+
+def _n_steps(ts, dt) -> int:
+    """The number of grid points t_0 + j dt up to the last sample (static)."""
+    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+        raise ValueError(f"`dt` must be a positive finite number or None; got {dt!r}.")
+    ends = _concrete(jnp.stack([ts[0], ts[-1]]))
+    if ends is None:
+        raise ValueError(
+            "with `dt`, the stream's times must be concrete (not traced) to fix the number "
+            "of steps: build the stream outside `jit`, or close over its times."
+        )
+    span = float(ends[1] - ends[0])
+    if not span > 0:
+        raise ValueError(f"`stream.ts` must increase; got t_0 = {ends[0]}, t_N = {ends[1]}.")
+    return int(math.floor(span / dt * (1 + 1e-12) + 1e-9)) + 1
+
+
+def _precheck(estimator, y0, h_max, solver):
+    """Refuse, before running, settings and steps that are concretely wrong."""
+    for ok, message in estimator.checks():
+        ok = _concrete(jnp.all(ok))
+        if ok is not None and not ok:
+            raise ValueError(f"{type(estimator).__name__}: {message}")
+    if isinstance(solver, diffrax.Euler):
+        bound = _concrete(estimator.max_stable_dt(y0))
+        h = _concrete(h_max)
+        if bound is not None and h is not None and not h <= bound:
+            raise ValueError(
+                f"the integration step {float(h):.4g} s exceeds the Euler stability bound "
+                f"{float(bound):.4g} s of {type(estimator).__name__}'s gains: the run would "
+                "diverge. Pass a smaller `dt` (the measurements are held between samples)."
+            )
+
+
+def _all_finite(tree) -> Bool[Array, ""]:
+    leaves = [
+        jnp.all(jnp.isfinite(x))
+        for x in jax.tree_util.tree_leaves(tree)
+        if jnp.issubdtype(jnp.result_type(x), jnp.inexact)
+    ]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.array(True)
+
+
+def _scan(f, carry, length: int, adjoint: AbstractAdjoint):
+    """`lax.scan(f, carry, None, length)`, checkpointed in blocks for `CheckpointAdjoint`."""
+    if isinstance(adjoint, DirectAdjoint) or length < 4:
+        return jax.lax.scan(f, carry, None, length=length)
+    block = min(adjoint.steps or max(1, math.isqrt(length)), length)
+    nb, rest = divmod(length, block)
+
+    @jax.checkpoint
+    def one_block(c, _):
+        return jax.lax.scan(f, c, None, length=block)
+
+    carry, ys = jax.lax.scan(one_block, carry, None, length=nb)
+    ys = jax.tree_util.tree_map(lambda y: y.reshape((nb * block,) + y.shape[2:]), ys)
+    if rest:
+        carry, ys_tail = jax.lax.scan(f, carry, None, length=rest)
+        ys = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b]), ys, ys_tail)
+    return carry, ys
+
+
 def run(
     estimator: AbstractEstimator,
     stream: Stream,
     *,
+    dt: float | None = None,
     solver: diffrax.AbstractSolver = diffrax.Euler(),
-    substeps: int = 1,
-    save_every: int | None = 1,
-    save_states: bool = False,
-    reducer: Reducer | None = None,
+    saveat: SaveAt = SaveAt(),
+    reducer: AbstractReducer | None = None,
+    adjoint: AbstractAdjoint = DirectAdjoint(),
     state0: PyTree = None,
     throw: bool = True,
 ) -> Solution:
     """Run an estimator over a sampled measurement stream.
 
-    At each sample $t_k$: apply `jump(state, y_k)`, read `output(t_k, state, y_k)`, then
-    integrate `vector_field` from $t_k$ to $t_{k+1}$ with `y_k` held (zero-order hold), in
-    `substeps` steps of `solver`. With the defaults (Euler, one step per sample) this is
-    the papers' discretisation at the sample rate. The held sample is passed to the solver
-    as its `args`, so the stages of a multi-stage solver never see the next sample, and the
-    sample index is the scan counter, never `floor(t / dt)`.
+    The time grid: with `dt=None`, the sample times themselves (one step per sample
+    interval, the papers' discretisation when they sample at the estimator's rate); with a
+    `dt`, the grid $t_j = t_0 + j\\,dt$ up to the last sample, whatever the stream's rate
+    (30 Hz camera data under a 1 kHz law). At grid time $t_j$ the estimator holds the
+    latest sample $y_k$ with $t_k \\le t_j$ (zero-order hold); when a new sample has
+    arrived, `jump(state, y_k)` fires; then `output(t_j, state, y_k)` is read and the state
+    is integrated to $t_{j+1}$ with one step of `solver` under the held sample (passed to
+    the solver as its `args`, so the stages of a multi-stage solver never see the next
+    sample; the sample index is exact, never `floor(t / dt)`).
+
+    After every step the runner checks the held sample (finite), the new state (finite,
+    `estimator.valid`) and the solver's own result; the first failure sets
+    `Solution.result` and `Solution.failed_sample` and freezes the state. Before the loop,
+    `estimator.checks()` (gains and constants) and, for Euler, the step against
+    `estimator.max_stable_dt(y_0)`; when these are concrete they raise `ValueError`
+    before anything runs.
 
     **Arguments:**
 
     - `estimator`: an `AbstractEstimator`. Its gains are array leaves: a new gain value
         reuses the compiled run, and `jax.vmap` over gains batches it.
     - `stream`: a `Stream` of N samples.
-    - `solver`: a diffrax solver with fixed steps (no step-size controller is used: the
-        sign-based laws have discontinuous right-hand sides).
-    - `substeps`: solver steps per sample interval.
-    - `save_every`: save the output (and state) at every `save_every`-th sample; it must
-        divide N. `None` saves nothing per sample (use a `reducer`). Saving all of a batch
-        costs B x N x d x 8 bytes.
-    - `save_states`: also save the states.
-    - `reducer`: a `Reducer` accumulating a summary over every sample.
-    - `state0`: start from this state instead of `estimator.init(y_0)` (to continue a run).
-    - `throw`: raise if the state becomes non-finite; else report it in `result`.
+    - `dt`: the integration step (a Python float), or `None` for the sample times.
+    - `solver`: a diffrax solver with fixed steps (the sign-based laws have
+        discontinuous right-hand sides: no step-size controller is used).
+    - `saveat`: a `SaveAt`: which signals to save, every how many steps.
+    - `reducer`: an `AbstractReducer` (e.g. `WindowRMS`) accumulated over every step.
+    - `adjoint`: `DirectAdjoint()` or `CheckpointAdjoint()` (bounded reverse-mode memory).
+    - `state0`: start from this state instead of `estimator.init(y_0)`.
+    - `throw`: raise on failure (a runtime error with the result's message); else only
+        report it in `result`.
 
     **Returns:** a `Solution`.
     """
-    n = _check_stream(stream, save_every, substeps)
-    ts = stream.ts
-    ys = stream.ys
-    truth = stream.truth
-    y0 = jax.tree_util.tree_map(lambda x: x[0], ys)
-    state = estimator.init(y0) if state0 is None else state0
-    term = diffrax.ODETerm(lambda t, s, y: estimator.vector_field(t, s, y))
-    t_next = jnp.concatenate([ts[1:], ts[-1:]])  # the last sample is not integrated past
-    ks = jnp.arange(n)
-
-    truth0 = jax.tree_util.tree_map(lambda x: x[0], truth)
-    acc = None if reducer is None else reducer.init(estimator.output(ts[0], state, y0), truth0)
-
-    def integrate(state, t0, t1, y):
-        h = (t1 - t0) / substeps
-
-        def one(i, s):
-            ta = t0 + i * h
-            tb = jnp.where(i == substeps - 1, t1, ta + h)
-            solver_state = solver.init(term, ta, tb, s, y)
-            s, _, _, _, _ = solver.step(term, ta, tb, s, y, solver_state, made_jump=False)
-            return s
-
-        if substeps == 1:
-            return one(0, state)
-        return jax.lax.fori_loop(0, substeps, one, state)
-
-    def make_step(save: bool):
-        """One sample: jump, read the output (only if it is saved or reduced), integrate."""
-
-        def sample_step(carry, inp):
-            state, acc = carry
-            k, t0, t1, y, tr = inp
-            state = estimator.jump(state, y)
-            saved = None
-            if save or reducer is not None:
-                out = estimator.output(t0, state, y)
-                if reducer is not None:
-                    acc = reducer.update(acc, k, t0, out, tr)
-                if save:
-                    saved = (out, state if save_states else None)
-            return (integrate(state, t0, t1, y), acc), saved
-
-        return sample_step
-
-    inputs = (ks, ts, t_next, ys, truth)
-    if save_every is None or save_every == 1:
-        step = make_step(save_every is not None)
-        (state, acc), saved = jax.lax.scan(step, (state, acc), inputs)
-        saved_ts = None if save_every is None else ts
-    else:
-        # Nested scans: the first sample of each chunk of `save_every` is saved; the output
-        # of the others is not computed at all (unless a reducer needs it).
-        chunked = jax.tree_util.tree_map(
-            lambda x: x.reshape((n // save_every, save_every) + x.shape[1:]), inputs
+    n = _check_stream(stream)
+    if not isinstance(estimator, AbstractEstimator):
+        raise ValueError(
+            f"`estimator` must be a visjax AbstractEstimator; got {type(estimator).__name__}."
         )
-        save_step, plain_step = make_step(True), make_step(False)
+    if not isinstance(saveat, SaveAt):
+        raise ValueError(f"`saveat` must be a visjax SaveAt; got {type(saveat).__name__}.")
+    if reducer is not None and not isinstance(reducer, AbstractReducer):
+        raise ValueError(f"`reducer` must be an AbstractReducer; got {type(reducer).__name__}.")
+    if not isinstance(adjoint, AbstractAdjoint):
+        raise ValueError(f"`adjoint` must be an AbstractAdjoint; got {type(adjoint).__name__}.")
+    n_steps = n if dt is None else _n_steps(stream.ts, dt)
+    y0 = jax.tree_util.tree_map(lambda x: x[0], stream.ys)
+    h_max = jnp.max(jnp.diff(stream.ts)) if dt is None else jnp.asarray(dt)
+    _precheck(estimator, y0, h_max, solver)
+    return _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state0, throw)
 
-        def chunk_step(carry, chunk):
-            first = jax.tree_util.tree_map(lambda x: x[0], chunk)
-            rest = jax.tree_util.tree_map(lambda x: x[1:], chunk)
-            carry, saved = save_step(carry, first)
-            carry, _ = jax.lax.scan(plain_step, carry, rest)
-            return carry, saved
 
-        (state, acc), saved = jax.lax.scan(chunk_step, (state, acc), chunked)
-        saved_ts = ts[::save_every]
+@eqx.filter_jit
+def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state0, throw):
+    ts, ys, truth = stream.ts, stream.ys, stream.truth
+    n = ts.shape[0]
+    last = n_steps - 1
+    # The grid, the held sample and its arrival are computed per step from a counter, so
+    # the loop carries no per-step arrays (reverse-mode memory is what `adjoint` stores).
+    if dt is None:
 
-    outputs, states = (None, None) if saved is None else saved
-    finite = jnp.all(
-        jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(state)])
-    )
-    result = RESULTS.where(finite, RESULTS.successful, RESULTS.nonfinite_state)
+        def grid_time(j):
+            return ts[j]
+
+        def held_sample(j):
+            return j
+
+        h_max = jnp.max(jnp.diff(ts))
+    else:
+        dt_ = jnp.asarray(dt, ts.dtype)
+
+        def grid_time(j):
+            return ts[0] + j.astype(ts.dtype) * dt_
+
+        def held_sample(j):
+            arrived = jnp.searchsorted(ts, grid_time(j) + 1e-6 * dt_, side="right") - 1
+            return jnp.clip(jax.lax.stop_gradient(arrived), 0, n - 1).astype(jnp.int32)
+
+        h_max = dt_
+
+    def at(tree, k):
+        return jax.tree_util.tree_map(lambda x: x[k], tree)
+
+    y0 = at(ys, 0)
+    state = estimator.init(y0) if state0 is None else state0
+
+    # gains and constants, and the step against the declared stability bound
+    checks = estimator.checks()
+    settings_ok = jnp.all(jnp.stack([jnp.all(ok) for ok, _ in checks] + [jnp.array(True)]))
+    stable = jnp.array(True)
+    if isinstance(solver, diffrax.Euler):
+        stable = h_max <= jax.lax.stop_gradient(estimator.max_stable_dt(y0))
+    r = RESULTS.successful
+    r = RESULTS.where(~(_all_finite(state) & estimator.valid(state, y0)), RESULTS.diverged, r)
+    r = RESULTS.where(~_all_finite(state), RESULTS.nonfinite_state, r)
+    r = RESULTS.where(~_all_finite(y0), RESULTS.nonfinite_measurement, r)
+    r = RESULTS.where(~stable, RESULTS.unstable_step, r)
+    r = RESULTS.where(~settings_ok, RESULTS.invalid_settings, r)
+    failed = jnp.where(r == RESULTS.successful, -1, 0).astype(jnp.int32)
+
+    term = diffrax.ODETerm(lambda t, s, y: estimator.vector_field(t, s, y))
+    acc = None
+    if reducer is not None:
+        acc = reducer.init(estimator.output(ts[0], state, y0), at(truth, 0))
+
+    has_jump = type(estimator).jump is not AbstractEstimator.jump
+
+    def step(carry, save: bool):
+        state_in, acc, r, failed, j, k_prev = carry
+        t0 = grid_time(j)
+        t1 = grid_time(jnp.minimum(j + 1, last))  # the last point is not integrated past
+        k = held_sample(j)
+        y = at(ys, k)
+        if has_jump:
+            state = jax.lax.cond(
+                k != k_prev, lambda s, y: estimator.jump(s, y), lambda s, y: s, state_in, y
+            )
+        else:
+            state = state_in
+        saved = None
+        if save or reducer is not None:
+            out = estimator.output(t0, state, y)
+            if reducer is not None:
+                acc = reducer.update(acc, t0, out, at(truth, k))
+            if save:
+                saved = (
+                    out if saveat.outputs else None,
+                    estimator.diagnostics(t0, state, y) if saveat.diagnostics else None,
+                    state if saveat.states else None,
+                )
+        solver_state = solver.init(term, t0, t1, state, y)
+        s_new, _, _, _, solver_r = solver.step(term, t0, t1, state, y, solver_state, False)
+        code = RESULTS.successful
+        code = RESULTS.where(~estimator.valid(s_new, y), RESULTS.diverged, code)
+        code = RESULTS.where(~_all_finite(s_new), RESULTS.nonfinite_state, code)
+        code = RESULTS.where(
+            solver_r == diffrax.RESULTS.successful, code, RESULTS.promote(solver_r)
+        )
+        code = RESULTS.where(_all_finite(y), code, RESULTS.nonfinite_measurement)
+        newly = (failed < 0) & (code != RESULTS.successful)
+        r = RESULTS.where(newly, code, r)
+        failed = jnp.where(newly, k, failed).astype(jnp.int32)
+        keep = failed >= 0
+        state = jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), state_in, s_new)
+        return (state, acc, r, failed, j + 1, k), saved
+
+    def plain(c, _):
+        return step(c, False)[0], None
+
+    def saving_step(c, _):
+        return step(c, True)
+
+    carry = (state, acc, r, failed, jnp.zeros((), jnp.int32), jnp.full((), -1, jnp.int32))
+    saving = saveat.any
+    every = saveat.every
+    if not saving:
+        carry, _ = _scan(plain, carry, n_steps, adjoint)
+        saved = None
+    elif every == 1:
+        carry, saved = _scan(saving_step, carry, n_steps, adjoint)
+    else:
+        # chunks of `every` steps: the first of each is saved; the others' outputs are not
+        # computed at all (unless a reducer needs them)
+        def chunk(length):
+            def chunk_step(c, _):
+                c, out = step(c, True)
+                c, _ = jax.lax.scan(plain, c, None, length=length - 1)
+                return c, out
+
+            return chunk_step
+
+        nc, rest = divmod(n_steps, every)
+        carry, saved = _scan(chunk(every), carry, nc, adjoint)
+        if rest:
+            carry, tail = chunk(rest)(carry, None)
+            saved = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), saved, tail)
+    state, acc, r, failed, _, _ = carry
+    outputs, diagnostics, states = (None, None, None) if saved is None else saved
+    saved_ts = None
+    if saving:
+        saved_ts = jax.vmap(grid_time)(jnp.arange(0, n_steps, every, dtype=jnp.int32))
     sol = Solution(
         ts=saved_ts,
         outputs=outputs,
+        diagnostics=diagnostics,
         states=states,
         final_state=state,
         summary=acc,
-        result=result,
+        result=r,
+        failed_sample=failed,
     )
-    return raise_or_keep(result, sol, throw)
-
-
-def window_rms_reducer(
-    t_start: float, t_end: float, error: Callable[[PyTree, PyTree], Array] | None = None
-) -> Reducer:
-    """A `Reducer` of the RMS and max-abs of `error(output, truth)` over `t_start <= t < t_end`.
-
-    Its summary is a dict with `rms` and `max` (per component) and `count`. By default the
-    error is `output - truth`.
-    """
-    if error is None:
-        error = _difference
-
-    def init(out0, truth0):
-        e = error(out0, truth0)
-        z = jnp.zeros_like(e)
-        return {"sumsq": z, "max": z, "count": jnp.zeros((), e.dtype)}
-
-    def update(acc, k, t, out, truth):
-        e = error(out, truth)
-        inside = (t >= t_start) & (t < t_end)
-        return {
-            "sumsq": acc["sumsq"] + jnp.where(inside, e**2, 0.0),
-            "max": jnp.where(inside, jnp.maximum(acc["max"], jnp.abs(e)), acc["max"]),
-            "count": acc["count"] + jnp.where(inside, 1.0, 0.0),
-        }
-
-    return Reducer(init=init, update=update)
-
-
-def _difference(out: Any, truth: Any):
-    return out - truth
-
-
-def summary_rms(summary) -> Array:
-    """The RMS per component from a `window_rms_reducer` summary (batched or not)."""
-    count = jnp.maximum(summary["count"], 1.0)
-    return jnp.sqrt(summary["sumsq"] / count[..., None])
+    if throw:
+        for ok, message in checks:
+            sol = eqx.error_if(sol, ~jnp.all(ok), f"{type(estimator).__name__}: {message}")
+        sol = r.error_if(sol, r != RESULTS.successful)
+    return sol

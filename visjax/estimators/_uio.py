@@ -11,11 +11,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
-from ..geometry._util import as_float, check_shape
-from ..kinematics._perspective import camera_term, known_input_term
-from ._base import AbstractEstimator
+from .._util import as_float, check_shape
+from ..geometry import pixel_to_normalized
+from ..kinematics import camera_term, known_input_term
+from ._base import AbstractEstimator, Stream
 
 C_OUTPUT = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # y = C x, eq. (3.1)
 
@@ -92,29 +93,67 @@ def rank_condition(A, C, D, *, tol: float = 1e-9) -> bool:
     return True
 
 
+class MovingCameraMeasurement(eqx.Module):
+    """One sample (or, in a `Stream`, all samples: a leading axis) for the UIO: `y` (2,) the
+    point's normalized image coordinates
+    $[x_1, x_2]$ (eq. (3.1)); `u` (6,) the camera velocities $[v_c, \\omega]$ (camera basis)."""
+
+    y: Float[Array, "*batch 2"]
+    u: Float[Array, "*batch 6"]
+
+
+class UIOState(eqx.Module):
+    """The observer state $z$ of eq. (3.5); $\\hat x = z - E y$."""
+
+    z: Float[Array, "3"]
+
+
+class UIOOutput(eqx.Module):
+    """$\\hat x = [\\hat x_1, \\hat x_2, \\hat x_3]$ ($[X/Z, Y/Z, 1/Z]$) and the point's
+    position in the camera frame, $[\\hat x_1/\\hat x_3, \\hat x_2/\\hat x_3, 1/\\hat x_3]$ (in
+    the units of the camera velocities)."""
+
+    x_hat: Float[Array, "3"]
+    position: Float[Array, "3"]
+
+
 class UnknownInputObserver(AbstractEstimator):
     """The nonlinear unknown input observer of eq. (3.5).
 
     $\\dot z = N z + L y + M \\bar f(\\hat x, u) + M g(y, u)$, $\\hat x = z - E y$, with
     $\\bar f(x, u) = f(x, u) - A x$ (eq. (3.2)) and $E, M, N, L$ from `uio_matrices`.
-    Measurements are `(y, u)`: normalized image coordinates (2,) and camera velocities (6,).
-    Output: $\\hat x$ and the point's position in the camera frame,
-    $[\\hat x_1/\\hat x_3, \\hat x_2/\\hat x_3, 1/\\hat x_3]$.
+    Measurements are `MovingCameraMeasurement`s (`moving_camera_stream`).
+
+    Checks (`checks`, under `jit` and `vmap`): $N$ Hurwitz (chapter 3), $x_{3,\\mathrm{guess}}
+    > 0$. Valid state: the depth estimate is positive, $\\hat x_3 > 0$ (the point is in front
+    of the camera, Assumption 2.1), and $\\|\\hat x\\|_\\infty$ below `bound`. Euler
+    stability: the error dynamics are $\\dot e = N e$ plus the Lipschitz term, so the step
+    must satisfy $h < \\min_\\lambda -2\\,\\mathrm{Re}\\lambda/|\\lambda|^2$ over the eigenvalues
+    of $N$ (`max_stable_dt`).
 
     **Fields:** `A`, `C`, `D`, `K`, `Y` as in chapter 3 (`K`, `Y` are the gains; gradients
     flow through them); `x3_guess`: the initial guess of $1/Z$ (the observer starts at
-    $\\hat x(0) = [y(0), x_{3,\\mathrm{guess}}]$).
+    $\\hat x(0) = [y(0), x_{3,\\mathrm{guess}}]$); `bound` (default 1e6).
     """
 
-    A: Float[Array, "3 3"]
-    D: Float[Array, "3 1"]
-    K: Float[Array, "3 2"]
-    Y: Float[Array, "3 2"]
-    x3_guess: Float[Array, ""]
-    C: Float[Array, "2 3"] = eqx.field(default_factory=lambda: jnp.array(C_OUTPUT))
+    A: Float[Array, "3 3"] = eqx.field(converter=as_float)
+    D: Float[Array, "3 1"] = eqx.field(converter=as_float)
+    K: Float[Array, "3 2"] = eqx.field(converter=as_float)
+    Y: Float[Array, "3 2"] = eqx.field(converter=as_float)
+    x3_guess: Float[Array, ""] = eqx.field(converter=as_float)
+    C: Float[Array, "2 3"] = eqx.field(converter=as_float, default=C_OUTPUT)
+    bound: Float[Array, ""] = eqx.field(converter=as_float, default=1e6)
 
     def __check_init__(self):
-        for name, shape in (("A", (3, 3)), ("D", (3, 1)), ("K", (3, 2)), ("Y", (3, 2))):
+        for name, shape in (
+            ("A", (3, 3)),
+            ("D", (3, 1)),
+            ("K", (3, 2)),
+            ("Y", (3, 2)),
+            ("C", (2, 3)),
+            ("x3_guess", ()),
+            ("bound", ()),
+        ):
             if jnp.shape(getattr(self, name)) != shape:
                 raise ValueError(
                     f"`{name}` must have shape {shape}; got {jnp.shape(getattr(self, name))}."
@@ -123,22 +162,72 @@ class UnknownInputObserver(AbstractEstimator):
     def _matrices(self):
         return uio_matrices(self.A, self.C, self.D, self.K, self.Y)
 
-    def init(self, y0):
-        y, _ = y0
-        E, _, _, _ = self._matrices()
-        x_hat = jnp.concatenate([y, jnp.reshape(self.x3_guess, (1,)).astype(y.dtype)])
-        return x_hat + E @ y  # z = x_hat + E y
+    def _N_eigenvalues(self):
+        _, _, N, _ = self._matrices()
+        return jnp.linalg.eigvals(jax.lax.stop_gradient(N))
 
-    def vector_field(self, t, z, meas):
-        y, u = meas
+    def checks(self):
+        lam = self._N_eigenvalues()
+        return (
+            (jnp.max(jnp.real(lam)) < 0, "`N` = M A - K C must be Hurwitz (chapter 3)."),
+            (self.x3_guess > 0, "`x3_guess` (the initial 1/Z) must be positive."),
+        )
+
+    def max_stable_dt(self, y=None):
+        lam = self._N_eigenvalues()
+        return jnp.min(-2.0 * jnp.real(lam) / jnp.abs(lam) ** 2)
+
+    def init(self, y0: MovingCameraMeasurement) -> UIOState:
+        E, _, _, _ = self._matrices()
+        x3 = jnp.reshape(self.x3_guess, (1,)).astype(y0.y.dtype)
+        x_hat = jnp.concatenate([y0.y, x3])
+        return UIOState(z=x_hat + E @ y0.y)  # z = x_hat + E y
+
+    def _x_hat(self, state: UIOState, y):
+        E, _, _, _ = self._matrices()
+        return state.z - E @ y
+
+    def vector_field(self, t, state: UIOState, meas: MovingCameraMeasurement) -> UIOState:
+        y, u = meas.y, meas.u
         E, M, N, L = self._matrices()
-        x_hat = z - E @ y
+        x_hat = state.z - E @ y
         f_bar = camera_term(x_hat, u) - self.A @ x_hat  # eq. (3.2)
-        return N @ z + L @ y + M @ f_bar + M @ known_input_term(y, u)  # eq. (3.5)
+        return UIOState(z=N @ state.z + L @ y + M @ f_bar + M @ known_input_term(y, u))  # (3.5)
 
-    def output(self, t, z, meas):
-        y, _ = meas
-        E, _, _, _ = self._matrices()
-        x_hat = z - E @ y
+    def output(self, t, state: UIOState, meas: MovingCameraMeasurement) -> UIOOutput:
+        x_hat = self._x_hat(state, meas.y)
         position = jnp.stack([x_hat[0], x_hat[1], jnp.ones_like(x_hat[2])]) / x_hat[2]
-        return {"x_hat": x_hat, "position": position}
+        return UIOOutput(x_hat=x_hat, position=position)
+
+    def valid(self, state: UIOState, meas: MovingCameraMeasurement):
+        x_hat = self._x_hat(state, meas.y)
+        return (x_hat[2] > 0) & (jnp.max(jnp.abs(x_hat)) < self.bound)
+
+
+def moving_camera_stream(
+    ts: Float[ArrayLike, " N"],
+    pixels: Float[ArrayLike, "N 2"],
+    velocities: Float[ArrayLike, "N 6"],
+    K_c: Float[ArrayLike, "3 3"],
+    *,
+    truth=None,
+) -> Stream:
+    """The measurement `Stream` of the UIO from raw measurements.
+
+    **Arguments:**
+
+    - `ts` (N,): the camera's sample times (any rate; `run(..., dt=...)` holds them).
+    - `pixels` (N, 2): the tracked point's pixel coordinates.
+    - `velocities` (N, 6): the camera's measured $[v_c, \\omega]$ in the camera basis
+        (from the robot's joint rates, or any odometry), at the same times.
+    - `K_c` (3, 3): the camera matrix used to normalise pixels ($y = K_c^{-1} p$).
+    - `truth`: optional ground truth for a reducer.
+    """
+    ts, pixels, velocities, K_c = (as_float(x) for x in (ts, pixels, velocities, K_c))
+    check_shape(ts, (None,), "ts")
+    n = ts.shape[0]
+    check_shape(pixels, (n, 2), "pixels")
+    check_shape(velocities, (n, 6), "velocities")
+    check_shape(K_c, (3, 3), "K_c")
+    y = pixel_to_normalized(pixels, K_c)
+    return Stream(ts=ts, ys=MovingCameraMeasurement(y=y, u=velocities), truth=truth)

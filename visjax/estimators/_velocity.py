@@ -17,10 +17,10 @@ time loop then costs a few dozen flops per step.
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, raise_or_keep
+from .._util import as_float, check_points, check_shape
 from ..geometry import (
     L_omega,
     L_omega_inv,
@@ -31,20 +31,21 @@ from ..geometry import (
     so3_log,
     to_homogeneous,
 )
-from ..geometry._util import as_float, check_points, check_shape
-from ._base import AbstractEstimator
+from ._base import AbstractEstimator, Stream
 
 
 class VelocityMeasurement(eqx.Module):
     """One sample of what the velocity estimator reads.
 
     **Fields:** `e` (6,): $e = [e_v, e_\\omega]$; `J` (6, 6): eq. (33); `J_inv` (6, 6): its
-    inverse, in closed form from the block structure.
+    inverse, in closed form from the block structure; `result`: why the frame could not
+    be measured (then `e`, `J`, `J_inv` are NaN, never a finite placeholder).
     """
 
-    e: Float[Array, "6"]
-    J: Float[Array, "6 6"]
-    J_inv: Float[Array, "6 6"]
+    e: Float[Array, "*batch 6"]
+    J: Float[Array, "*batch 6 6"]
+    J_inv: Float[Array, "*batch 6 6"]
+    result: RESULTS
 
 
 def error_signal(
@@ -133,6 +134,9 @@ def velocity_measurements(
     `R_star` the known reference orientation; `s1` feature 1 in the object frame; `z1_star`
     its reference depth (`depth_from_known_length`); `n_star` the plane normal
     (`plane_normal_from_frames`); `throw` as in `euclidean_reconstruction`.
+
+    **Returns:** a `VelocityMeasurement`; with `throw=False` its `result` says whether the
+    frame was measured (a failed frame is all NaN).
     """
     p_ref = check_points(p_ref, "p_ref")
     A = as_float(A)
@@ -151,7 +155,9 @@ def velocity_measurements(
         rec.result,
         RESULTS.where(ok, RESULTS.successful, RESULTS.singular_jacobian),
     )
-    out = VelocityMeasurement(e=e, J=J, J_inv=J_inv)
+    bad = result != RESULTS.successful
+    e, J, J_inv = (jnp.where(bad, jnp.nan, x) for x in (e, J, J_inv))
+    out = VelocityMeasurement(e=e, J=J, J_inv=J_inv, result=result)
     return raise_or_keep(result, out, throw)
 
 
@@ -264,6 +270,28 @@ def plane_normal_from_frames(
     return n / jnp.linalg.norm(n)
 
 
+class VelocityState(eqx.Module):
+    """The state of eqs. (39)-(40): $\\hat e$ and $\\eta = \\int_{t_0}^t (K + I_6)\\tilde e +
+    \\rho\\,\\mathrm{sgn}(\\tilde e)\\,d\\tau$."""
+
+    e_hat: Float[Array, "6"]
+    eta: Float[Array, "6"]
+
+
+class VelocityOutput(eqx.Module):
+    """The estimated velocity $\\hat v = J^{-1}\\hat\\kappa$ (Theorem 2): $[\\hat v_e,
+    \\hat\\omega_e]$ in the camera frame."""
+
+    v_hat: Float[Array, "6"]
+
+
+class VelocityDiagnostics(eqx.Module):
+    """$\\tilde e = e - \\hat e$ (eq. (36)) and $\\hat\\kappa$ (eq. (40))."""
+
+    e_tilde: Float[Array, "6"]
+    kappa_hat: Float[Array, "6"]
+
+
 class VelocityEstimator(AbstractEstimator):
     """The continuous sign-based velocity estimator of seed 000, eqs. (39)-(40).
 
@@ -276,12 +304,21 @@ class VelocityEstimator(AbstractEstimator):
     The right-hand side is discontinuous: run it with fixed steps (the default Euler at the
     sample rate is the paper's 1 kHz discretisation), never an adaptive controller.
 
-    **Fields:** `K`, `rho`: the diagonals of the positive definite diagonal gains (shape (6,)).
-    Measurements are `VelocityMeasurement`s.
+    Euler stability: per degree of freedom the linear part of the error dynamics is
+    $\\dot{\\tilde e} = -(k + 1)\\tilde e - \\eta$, $\\dot\\eta = (k + 1)\\tilde e$, with
+    characteristic polynomial $\\lambda^2 + (k + 1)\\lambda + (k + 1)$; Euler steps are stable
+    for $h < \\min_\\lambda -2\\,\\mathrm{Re}\\lambda / |\\lambda|^2$ (`max_stable_dt`): 6.7 ms
+    for the gains of eq. (63), so one step per 33 ms camera frame diverges.
+
+    **Fields:** `K`, `rho`: the diagonals of the positive definite diagonal gains (shape
+    (6,)); `bound`: the state is valid while every entry of $\\hat e$ and $\\eta$ stays
+    below it in magnitude (pixels, pixels/s: default 1e8). Measurements are
+    `VelocityMeasurement`s.
     """
 
-    K: Float[Array, "6"]
-    rho: Float[Array, "6"]
+    K: Float[Array, "6"] = eqx.field(converter=as_float)
+    rho: Float[Array, "6"] = eqx.field(converter=as_float)
+    bound: Float[Array, ""] = eqx.field(converter=as_float, default=1e8)
 
     def __check_init__(self):
         for name in ("K", "rho"):
@@ -290,25 +327,46 @@ class VelocityEstimator(AbstractEstimator):
                 raise ValueError(
                     f"`{name}` must be the diagonal of a 6x6 gain, shape (6,); got {jnp.shape(g)}."
                 )
-            if not isinstance(g, jax.core.Tracer) and not np.all(np.asarray(g) > 0):
-                raise ValueError(f"`{name}` must be positive (eq. (40)); got {np.asarray(g)}.")
+        if jnp.shape(self.bound) != ():
+            raise ValueError(f"`bound` must be a scalar; got shape {jnp.shape(self.bound)}.")
 
-    def init(self, y0: VelocityMeasurement):
-        return (y0.e, jnp.zeros_like(y0.e))
+    def checks(self):
+        return (
+            (jnp.all(self.K > 0), "`K` must be positive definite (eq. (40))."),
+            (jnp.all(self.rho > 0), "`rho` must be positive definite (eq. (40))."),
+            (self.bound > 0, "`bound` must be positive."),
+        )
 
-    def _kappa(self, state, y):
-        e_hat, eta = state
-        e_tilde = y.e - e_hat  # eq. (36)
-        return eta + (self.K + 1.0) * e_tilde, e_tilde  # eq. (40)
+    def max_stable_dt(self, y=None):
+        a = self.K + 1.0
+        fast = 0.5 * (a + jnp.sqrt(jnp.maximum(a * a - 4.0 * a, 0.0)))
+        # real roots (a >= 4): 2 / |lambda_fast|; complex roots: -2 Re(l) / |l|^2 = 1
+        per_dof = jnp.where(a >= 4.0, 2.0 / fast, 1.0)
+        return jnp.min(per_dof)
 
-    def vector_field(self, t, state, y: VelocityMeasurement):
+    def init(self, y0: VelocityMeasurement) -> VelocityState:
+        return VelocityState(e_hat=y0.e, eta=jnp.zeros_like(y0.e))
+
+    def _kappa(self, state: VelocityState, y: VelocityMeasurement):
+        e_tilde = y.e - state.e_hat  # eq. (36)
+        return state.eta + (self.K + 1.0) * e_tilde, e_tilde  # eq. (40)
+
+    def vector_field(self, t, state: VelocityState, y: VelocityMeasurement) -> VelocityState:
         kappa, e_tilde = self._kappa(state, y)
         d_eta = (self.K + 1.0) * e_tilde + self.rho * jnp.sign(e_tilde)  # integrand of (40)
-        return (kappa, d_eta)  # eq. (39)
+        return VelocityState(e_hat=kappa, eta=d_eta)  # eq. (39)
 
-    def output(self, t, state, y: VelocityMeasurement):
+    def output(self, t, state: VelocityState, y: VelocityMeasurement) -> VelocityOutput:
         kappa, _ = self._kappa(state, y)
-        return y.J_inv @ kappa  # Theorem 2: v_hat = J^{-1} kappa_hat
+        return VelocityOutput(v_hat=y.J_inv @ kappa)  # Theorem 2: v_hat = J^{-1} kappa_hat
+
+    def diagnostics(self, t, state: VelocityState, y: VelocityMeasurement):
+        kappa, e_tilde = self._kappa(state, y)
+        return VelocityDiagnostics(e_tilde=e_tilde, kappa_hat=kappa)
+
+    def valid(self, state: VelocityState, y=None):
+        big = jnp.maximum(jnp.max(jnp.abs(state.e_hat)), jnp.max(jnp.abs(state.eta)))
+        return big < self.bound
 
 
 def fixed_camera_stream(
@@ -323,6 +381,7 @@ def fixed_camera_stream(
     z1_star: Float[ArrayLike, ""] | None = None,
     n_prior: Float[ArrayLike, "3"] | None = None,
     truth=None,
+    throw: bool = True,
 ):
     """The measurement `Stream` of the velocity estimator from raw pixel frames.
 
@@ -331,10 +390,12 @@ def fixed_camera_stream(
     `depth_from_known_length` with the origin's pixel (default: `diagonal_intersection` of
     the four reference features). Then $e$, $J$, $J^{-1}$ of every frame, vmapped.
 
+    With `throw=False` a frame that cannot be measured (a NaN pixel, degenerate points)
+    is all NaN in the stream, and `run` stops there with `RESULTS.nonfinite_measurement`
+    and its index; with `throw=True` building the stream raises.
+
     **Returns:** `(stream, n_star, z1_star)`.
     """
-    from ._base import Stream
-
     pixels = as_float(pixels)
     ts = as_float(ts)
     if pixels.ndim != 3 or pixels.shape[-1] != 2:
@@ -350,7 +411,7 @@ def fixed_camera_stream(
         if origin_pixel is None:
             origin_pixel = diagonal_intersection(p_ref)
         z1_star = depth_from_known_length(p_ref[0], origin_pixel, A, n_star, R_star, s1)
-    ys = jax.vmap(lambda pc: velocity_measurements(p_ref, pc, A, R_star, s1, z1_star, n_star))(
-        pixels
-    )
+    ys = jax.vmap(
+        lambda pc: velocity_measurements(p_ref, pc, A, R_star, s1, z1_star, n_star, throw=throw)
+    )(pixels)
     return Stream(ts=ts, ys=ys, truth=truth), n_star, z1_star

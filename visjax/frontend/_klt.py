@@ -7,7 +7,6 @@ $g = \\nabla((I_0 + I_1)/2)$, iterated to convergence. `klt_translation` transcr
 `klt_track` is OpenCV's pyramidal Lucas-Kanade, the implementation the thesis used.
 """
 
-import cv2
 import numpy as np
 
 
@@ -19,6 +18,8 @@ def klt_track(frames, p0, *, win: int = 21, levels: int = 3) -> tuple[np.ndarray
 
     **Returns:** `(tracks, ok)`: (N, n, 2) positions and (N, n) booleans (tracked so far).
     """
+    import cv2
+
     frames = np.asarray(frames)
     if frames.ndim != 3 or frames.dtype != np.uint8:
         raise ValueError(f"`frames` must be (N, H, W) uint8; got {frames.shape} {frames.dtype}.")
@@ -47,6 +48,8 @@ def klt_translation(I0, I1, point, *, win: int = 15, iterations: int = 30, tol: 
     Uniform weight $\\omega$ over a `win` x `win` window; sub-pixel windows by bilinear
     interpolation. Returns `(d, converged)`.
     """
+    import cv2
+
     I0 = np.asarray(I0, np.float32)
     I1 = np.asarray(I1, np.float32)
     c = tuple(float(x) for x in point)

@@ -11,7 +11,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._util import as_float
+from .._util import as_float
 
 
 def camera_matrix_lstsq(

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, raise_or_keep
-from ._util import as_float, check_shape
+from .._util import as_float, check_shape
 
 
 def intrinsic_matrix(
@@ -100,24 +100,28 @@ def normalized_to_pixel(
     return jnp.stack([u, v], axis=-1)
 
 
-def project(
-    points: Float[ArrayLike, "... 3"],
-    A: Float[ArrayLike, "3 3"],
-    *,
-    throw: bool = True,
-) -> Float[Array, "... 2"]:
+def project(points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"]) -> Float[Array, "... 2"]:
     """Project 3D points given in the camera frame to pixels (eqs. (10) and (15)).
 
     **Arguments:**
 
     - `points`: $\\bar m = [x, y, z]$ in the camera frame, shape (..., 3).
     - `A`: the intrinsic matrix.
-    - `throw`: if `True` (default), a point with depth $z \\le 0$ raises at run time
-        ("point is behind the camera"). With `False` the pixels are returned together with
-        a `RESULTS` item: `project(..., throw=False) -> (pixels, result)`.
+
+    A point with depth $z \\le 0$ ("behind the camera") or a non-finite point raises at
+    run time; `project_checked` returns a result code instead.
 
     **Returns:** pixel coordinates, shape (..., 2).
     """
+    pixels, result = project_checked(points, A)
+    return raise_or_keep(result, pixels, True)
+
+
+def project_checked(
+    points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"]
+) -> tuple[Float[Array, "... 2"], RESULTS]:
+    """`project` that never raises: returns `(pixels, result)`; the pixels of a point behind
+    the camera are NaN (never a finite placeholder)."""
     points = _check_last(points, 3, "points")
     A = _check_A(A)
     z = points[..., 2]
@@ -125,15 +129,14 @@ def project(
     nonfinite = ~jnp.all(jnp.isfinite(points))
     result = RESULTS.where(
         nonfinite,
-        RESULTS.nonfinite_input,
+        RESULTS.nonfinite_pixels,
         RESULTS.where(bad_depth, RESULTS.behind_camera, RESULTS.successful),
     )
-    # Keep the division finite for points we are about to report.
+    # Keep the division finite for the points in front (and their gradients NaN-free).
     z_safe = jnp.where(z > 0.0, z, 1.0)
     m = points[..., :2] / z_safe[..., None]
     pixels = normalized_to_pixel(m, A)
-    if throw:
-        return raise_or_keep(result, pixels, True)
+    pixels = jnp.where((z > 0.0)[..., None], pixels, jnp.nan)
     return pixels, result
 
 

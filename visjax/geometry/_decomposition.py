@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._util import as_float, check_shape
+from .._util import as_float, check_shape
 
 
 def _safe_sqrt(x):

@@ -15,8 +15,8 @@ import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, raise_or_keep
+from .._util import as_float, check_points, check_shape
 from ._camera import to_homogeneous
-from ._util import as_float, check_points, check_shape
 
 
 def _rcond_tol(dtype) -> float:
@@ -29,7 +29,7 @@ def _rcond_tol(dtype) -> float:
 def _normalising_transform(p):
     """Hartley's similarity: centroid to the origin, RMS distance to sqrt(2)."""
     c = jnp.mean(p, axis=0)
-    d = p - c
+    d = p - c[None, :]
     ms = jnp.mean(jnp.sum(d**2, axis=1))
     ms_safe = jnp.where(ms > 0.0, ms, 1.0)
     s = jnp.sqrt(2.0 / ms_safe)
@@ -132,7 +132,7 @@ def _dlt(p_ref, p_cur):
 
     result = RESULTS.where(
         nonfinite,
-        RESULTS.nonfinite_input,
+        RESULTS.nonfinite_pixels,
         RESULTS.where(
             bad,
             RESULTS.degenerate_points,
@@ -155,11 +155,8 @@ def _check_pair(p_ref, p_cur):
 
 
 def find_homography(
-    p_ref: Float[ArrayLike, "n 2"],
-    p_cur: Float[ArrayLike, "n 2"],
-    *,
-    throw: bool = True,
-):
+    p_ref: Float[ArrayLike, "n 2"], p_cur: Float[ArrayLike, "n 2"]
+) -> Float[Array, "3 3"]:
     """The normalized projective homography $G_n$ with $p_i \\sim G_n p_i^*$ (eq. (17)).
 
     A normalized (Hartley) DLT: both point sets are moved to their centroid and scaled to an
@@ -174,16 +171,24 @@ def find_homography(
 
     - `p_ref`: reference pixels $p_i^*$, shape (n, 2), n >= 4.
     - `p_cur`: current pixels $p_i$, shape (n, 2).
-    - `throw`: if `True` (default), collinear or coincident points, non-finite pixels or a
-        vanishing $g_{33}$ raise at run time. With `False`, returns `(G_n, result)` with a
-        `RESULTS` item instead (and a finite placeholder `G_n` on failure).
+
+    Collinear or coincident points, non-finite pixels or a vanishing $g_{33}$ raise at run
+    time; `find_homography_checked` returns a result code instead.
 
     **Returns:** $G_n$, shape (3, 3).
     """
+    G_n, result = find_homography_checked(p_ref, p_cur)
+    return raise_or_keep(result, G_n, True)
+
+
+def find_homography_checked(
+    p_ref: Float[ArrayLike, "n 2"], p_cur: Float[ArrayLike, "n 2"]
+) -> tuple[Float[Array, "3 3"], RESULTS]:
+    """`find_homography` that never raises: returns `(G_n, result)`, with `G_n` all NaN
+    when `result` is not successful (never a finite placeholder)."""
     p_ref, p_cur = _check_pair(p_ref, p_cur)
     G_n, result = _dlt(p_ref, p_cur)
-    if throw:
-        return raise_or_keep(result, G_n, True)
+    G_n = jnp.where(result == RESULTS.successful, G_n, jnp.nan)
     return G_n, result
 
 

@@ -12,10 +12,10 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, raise_or_keep
+from .._util import as_float, check_shape
 from ._camera import pixel_to_normalized, to_homogeneous
 from ._decomposition import _decompose_core, _known_normal_core, select_solution
 from ._homography import _check_pair, _dlt, euclidean_homography
-from ._util import as_float, check_shape
 
 
 class Reconstruction(eqx.Module):

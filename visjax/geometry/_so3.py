@@ -12,7 +12,7 @@ a fixed camera* (seed 000), eqs. (24)-(31) and (A.3).
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._util import as_float, check_shape
+from .._util import as_float, check_shape
 
 
 def _small(dtype) -> float:

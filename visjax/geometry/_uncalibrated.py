@@ -31,7 +31,7 @@ pixels).
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._util import as_float, check_shape
+from .._util import as_float, check_shape
 
 
 def intrinsics_eq4(

@@ -8,7 +8,7 @@ camera frame, camera velocities $u = [v_c, \\omega]$ (camera basis), point veloc
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ..geometry._util import as_float
+from .._util import as_float
 
 
 def known_input_term(y: Float[ArrayLike, "2"], u: Float[ArrayLike, "6"]) -> Float[Array, "3"]:

@@ -11,8 +11,8 @@ import diffrax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._util import as_float, check_shape
 from ..geometry import skew
-from ..geometry._util import as_float, check_shape
 
 
 def integrate_pose(

@@ -1,26 +1,22 @@
-"""Scenarios: true motion and camera -> measurements and ground truth."""
+"""General scene builders: trajectories, camera rigs, sampling, pixel noise; no paper here.
 
-from ._fixed_camera import (
-    K_EQ63 as K_EQ63,
-    RHO_EQ63 as RHO_EQ63,
-    FixedCameraScenario as FixedCameraScenario,
-    fixed_camera_scenario as fixed_camera_scenario,
-    section6_velocity as section6_velocity,
-)
-from ._moving_camera import (
-    KC_REFINED as KC_REFINED,
-    KC_TOOLBOX as KC_TOOLBOX,
-    SETS as SETS,
-    MovingCameraScenario as MovingCameraScenario,
-    ThesisSet as ThesisSet,
-    moving_camera_scenario as moving_camera_scenario,
-)
+The papers' own scenarios are built from these in `visjax.papers`.
+"""
+
 from ._planar import (
     PlanarScenes as PlanarScenes,
     random_planar_scenes as random_planar_scenes,
     rotation_from_vector as rotation_from_vector,
 )
-from ._uncalibrated import (
-    UncalibratedScenario as UncalibratedScenario,
-    uncalibrated_scenario as uncalibrated_scenario,
+from ._rigs import (
+    add_pixel_noise as add_pixel_noise,
+    fixed_camera_pixels as fixed_camera_pixels,
+    hold_indices as hold_indices,
+    moving_camera_point as moving_camera_point,
+    platform_camera_pixels as platform_camera_pixels,
+)
+from ._trajectory import (
+    Trajectory as Trajectory,
+    integrate_twist as integrate_twist,
+    sample_times as sample_times,
 )

@@ -1,4 +1,4 @@
-"""Input checks shared by the geometry functions (run before tracing, on static shapes)."""
+"""Input checks shared by every package (run before tracing, on static shapes)."""
 
 import jax.numpy as jnp
 

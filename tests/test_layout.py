@@ -1,0 +1,50 @@
+"""The layers of DESIGN.md: imports flow down, OpenCV and cvxpy load only when used."""
+
+import ast
+import pathlib
+import subprocess
+import sys
+
+PACKAGE = pathlib.Path(__file__).parents[1] / "visjax"
+# a package imports only from those before it
+LAYERS = [
+    "geometry",
+    "kinematics",
+    "sim",
+    "estimators",
+    "baselines",
+    "design",
+    "frontend",
+    "papers",
+    "studies",
+]
+
+
+def _imported_subpackages(path: pathlib.Path) -> set[str]:
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level >= 1 and node.module:
+            rel = path.relative_to(PACKAGE).parts
+            if node.level == 2 or (node.level == 1 and len(rel) == 1):
+                found.add(node.module.split(".")[0])
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("visjax."):
+            found.add(node.module.split(".")[1])
+    return found
+
+
+def test_imports_flow_down_the_layers():
+    for i, name in enumerate(LAYERS):
+        allowed = set(LAYERS[:i]) | {"_results", "_util"}
+        for path in (PACKAGE / name).glob("*.py"):
+            used = _imported_subpackages(path) - {name}
+            assert used <= allowed, (path.name, used - allowed)
+
+
+def test_importing_visjax_loads_neither_opencv_nor_cvxpy():
+    code = (
+        "import sys, visjax; "
+        "assert 'cv2' not in sys.modules and 'cvxpy' not in sys.modules, "
+        "[m for m in ('cv2', 'cvxpy') if m in sys.modules]"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
