@@ -286,3 +286,34 @@ def test_dt_holds_slow_samples():
     assert m == first[-1] + 1  # the grid ends at the last sample
     np.testing.assert_allclose(slow.states, fast.states[:m], rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(slow.ts, fast_ts[:m], atol=1e-12)
+
+
+class FlakySolver(diffrax.AbstractSolver):
+    """Euler that reports a diffrax failure code once the state passes 1.5 (a stand-in for a
+    solver's own failure, e.g. an implicit solver whose root find diverges)."""
+
+    term_structure = diffrax.AbstractTerm
+    interpolation_cls = diffrax.LocalLinearInterpolation
+
+    def order(self, terms):
+        return 1
+
+    def init(self, terms, t0, t1, y0, args):
+        return None
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        y1 = jax.tree_util.tree_map(lambda y, d: y + (t1 - t0) * d, y0, terms.vf(t0, y0, args))
+        bad = jnp.max(jnp.abs(y1)) > 1.5
+        r = diffrax.RESULTS.where(
+            bad, diffrax.RESULTS.nonlinear_divergence, diffrax.RESULTS.successful
+        )
+        return y1, None, dict(y0=y0, y1=y1), None, r
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+
+def test_the_solvers_own_result_code_is_kept():
+    sol = run(Diverging(), _stream(400, dt=0.01), solver=FlakySolver(), throw=False)
+    assert sol.result == RESULTS.promote(diffrax.RESULTS.nonlinear_divergence)
+    assert int(sol.failed_sample) == 40  # (1.01)^41 > 1.5 first from sample 40

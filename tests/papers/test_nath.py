@@ -101,3 +101,14 @@ def test_100hz_logs_with_the_hold_reach_the_1khz_accuracy(runs):
     errors = np.linalg.norm(np.asarray(theta_s[:, :3] / theta_s[:, 3:] - sc.omega_s), axis=-1)
     assert np.all(errors < 3e-3), errors  # 1 kHz logs: 0.4-1.1 mm
     assert np.all(errors < 3 * final_errors(runs[True]) + 1e-3)
+
+
+def test_a_vanishing_scale_entry_is_a_result_code():
+    """theta_s with lambda_i = 0 (eq. (50)): the output omega_s = theta / lambda would be
+    infinite; the run reports `diverged` at sample 0 instead."""
+    sc = uncalibrated_scenario(0.05)
+    est = initial_estimator(sc)
+    est = eqx.tree_at(lambda e: e.theta_s0, est, est.theta_s0.at[2, 3].set(0.0))
+    sol = run(est, stream(sc), throw=False)
+    assert sol.result == RESULTS.diverged and int(sol.failed_sample) == 0
+    assert np.all(np.isfinite(sol.final_state.theta_s))

@@ -22,6 +22,8 @@ Numerics (see the issue note):
   along the constraint's normal (in the $\\Gamma$ metric) is removed.
 """
 
+from typing import final
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -32,6 +34,7 @@ from ..geometry import known_feature_regressors, to_homogeneous, unknown_feature
 from ._base import AbstractEstimator, Stream
 
 
+@final
 class PlatformMeasurement(eqx.Module):
     """One sample for the seed-004 estimator: the measured platform pose `R_b`, `x_b`,
     homogeneous pixels of the unknown (`p_s`, (n, 3)) and known (`p_c`, (m, 3)) features,
@@ -124,6 +127,7 @@ def _project(tau, theta, normals, margin, Gamma):
     return tau
 
 
+@final
 class AdaptiveState(eqx.Module):
     """The state of the two laws: `theta_c` (16,) the camera parameters; `info_c` (16, 16)
     $\\Gamma_\\varphi^{-1}$ (normalised, see the module docstring); `theta_s` (n, 4) the
@@ -137,12 +141,14 @@ class AdaptiveState(eqx.Module):
     resets: Float[Array, ""]
 
 
+@final
 class AdaptiveOutput(eqx.Module):
     """The unknown features' world positions, scale recovered (eqs. (50)-(51))."""
 
     omega_s: Float[Array, "n 3"]
 
 
+@final
 class AdaptiveDiagnostics(eqx.Module):
     """Prediction errors (px) of the known (`p_tilde_c`) and unknown (`p_tilde_s`)
     features; predicted depths `depth_s`, `depth_c`; the minimum eigenvalue of
@@ -159,6 +165,7 @@ class AdaptiveDiagnostics(eqx.Module):
     info_rate_s: Float[Array, "n 4 4"]
 
 
+@final
 class AdaptiveStructureEstimator(AbstractEstimator):
     """Seed 004: camera-parameter law (37)-(39) and structure law (41)-(45), output (50)-(51).
 

@@ -10,6 +10,7 @@ carries a result code.
 """
 
 import math
+from typing import final
 
 import diffrax
 import equinox as eqx
@@ -82,6 +83,7 @@ class AbstractEstimator(eqx.Module):
         return jnp.array(jnp.inf)
 
 
+@final
 class Stream(eqx.Module):
     """A sampled measurement stream: every leaf has the sample index first.
 
@@ -98,6 +100,7 @@ class Stream(eqx.Module):
     truth: PyTree = None
 
 
+@final
 class SaveAt(eqx.Module):
     """What `run` saves, and how often (a Module: a new value of a window never recompiles).
 
@@ -138,6 +141,7 @@ class AbstractReducer(eqx.Module):
         raise NotImplementedError
 
 
+@final
 class WindowSummary(eqx.Module):
     """The sum of squares, the max-abs and the count of an error over a time window."""
 
@@ -152,6 +156,7 @@ class WindowSummary(eqx.Module):
         return jnp.sqrt(self.sumsq / count[..., None])
 
 
+@final
 class WindowRMS(AbstractReducer):
     """RMS and max-abs of `output.<field> - truth` over `t_start <= t < t_end`.
 
@@ -186,10 +191,12 @@ class AbstractAdjoint(eqx.Module):
     """How reverse-mode differentiation through `run` stores the trajectory."""
 
 
+@final
 class DirectAdjoint(AbstractAdjoint):
     """Store every step's residuals: fastest; reverse-mode memory grows with the steps."""
 
 
+@final
 class CheckpointAdjoint(AbstractAdjoint):
     """Checkpoint every `steps` integration steps (default: about the square root of the
     number of steps): reverse mode stores one state per checkpoint and recomputes one
@@ -206,6 +213,7 @@ class CheckpointAdjoint(AbstractAdjoint):
             )
 
 
+@final
 class Solution(eqx.Module):
     """What `run` returns (whatever `throw` says).
 

@@ -7,6 +7,8 @@ $u = [v_c, \\omega]$ and the point's own velocity as unknown input (eq. (2.11));
 checks of chapter 3. Equation numbers are the thesis'; `THESIS_NOTES.md` restates them.
 """
 
+from typing import final
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -93,6 +95,7 @@ def rank_condition(A, C, D, *, tol: float = 1e-9) -> bool:
     return True
 
 
+@final
 class MovingCameraMeasurement(eqx.Module):
     """One sample (or, in a `Stream`, all samples: a leading axis) for the UIO: `y` (2,) the
     point's normalized image coordinates
@@ -102,12 +105,14 @@ class MovingCameraMeasurement(eqx.Module):
     u: Float[Array, "*batch 6"]
 
 
+@final
 class UIOState(eqx.Module):
     """The observer state $z$ of eq. (3.5); $\\hat x = z - E y$."""
 
     z: Float[Array, "3"]
 
 
+@final
 class UIOOutput(eqx.Module):
     """$\\hat x = [\\hat x_1, \\hat x_2, \\hat x_3]$ ($[X/Z, Y/Z, 1/Z]$) and the point's
     position in the camera frame, $[\\hat x_1/\\hat x_3, \\hat x_2/\\hat x_3, 1/\\hat x_3]$ (in
@@ -117,6 +122,7 @@ class UIOOutput(eqx.Module):
     position: Float[Array, "3"]
 
 
+@final
 class UnknownInputObserver(AbstractEstimator):
     """The nonlinear unknown input observer of eq. (3.5).
 

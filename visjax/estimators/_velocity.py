@@ -14,6 +14,8 @@ Everything that depends on one sample only (the reconstruction, $e$, $J$, $J^{-1
 time loop then costs a few dozen flops per step.
 """
 
+from typing import final
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -34,6 +36,7 @@ from ..geometry import (
 from ._base import AbstractEstimator, Stream
 
 
+@final
 class VelocityMeasurement(eqx.Module):
     """One sample of what the velocity estimator reads.
 
@@ -270,6 +273,7 @@ def plane_normal_from_frames(
     return n / jnp.linalg.norm(n)
 
 
+@final
 class VelocityState(eqx.Module):
     """The state of eqs. (39)-(40): $\\hat e$ and $\\eta = \\int_{t_0}^t (K + I_6)\\tilde e +
     \\rho\\,\\mathrm{sgn}(\\tilde e)\\,d\\tau$."""
@@ -278,6 +282,7 @@ class VelocityState(eqx.Module):
     eta: Float[Array, "6"]
 
 
+@final
 class VelocityOutput(eqx.Module):
     """The estimated velocity $\\hat v = J^{-1}\\hat\\kappa$ (Theorem 2): $[\\hat v_e,
     \\hat\\omega_e]$ in the camera frame."""
@@ -285,6 +290,7 @@ class VelocityOutput(eqx.Module):
     v_hat: Float[Array, "6"]
 
 
+@final
 class VelocityDiagnostics(eqx.Module):
     """$\\tilde e = e - \\hat e$ (eq. (36)) and $\\hat\\kappa$ (eq. (40))."""
 
@@ -292,6 +298,7 @@ class VelocityDiagnostics(eqx.Module):
     kappa_hat: Float[Array, "6"]
 
 
+@final
 class VelocityEstimator(AbstractEstimator):
     """The continuous sign-based velocity estimator of seed 000, eqs. (39)-(40).
 

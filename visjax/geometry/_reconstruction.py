@@ -7,6 +7,8 @@ $\\alpha_i g_{33}$ (eq. (17)), the Euclidean homography $H = g_{33} A^{-1} G_n A
 $g_{33}$, and every depth ratio $\\alpha_i = z_i^* / z_i$.
 """
 
+from typing import final
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
@@ -18,6 +20,7 @@ from ._decomposition import _decompose_core, _known_normal_core, select_solution
 from ._homography import _check_pair, _dlt, euclidean_homography
 
 
+@final
 class Reconstruction(eqx.Module):
     """What the Euclidean reconstruction of seed 000, section 3, returns.
 

@@ -25,6 +25,7 @@ What the paper leaves open, chosen here:
 """
 
 from collections.abc import Callable
+from typing import final
 
 import equinox as eqx
 import jax
@@ -54,6 +55,7 @@ K_EQ63 = (300.0, 300.0, 200.0, 15.0, 15.0, 15.0)
 RHO_EQ63 = (100.0, 100.0, 10.0, 1.0, 1.0, 1.0)
 
 
+@final
 class Section6Scenario(eqx.Module):
     """Sampled measurements and ground truth of a fixed-camera scenario.
 
@@ -129,6 +131,7 @@ def section6_scenario(
 DOF_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")
 
 
+@final
 class VelocityRun(eqx.Module):
     """One run of the section-6 experiment: times, true and estimated velocities."""
 

@@ -37,6 +37,7 @@ What the thesis leaves open, chosen here (each a documented assumption):
 """
 
 from dataclasses import dataclass
+from typing import final
 
 import equinox as eqx
 import jax
@@ -168,6 +169,7 @@ def _velocities(s: ThesisSet, t):
     return u, v_p
 
 
+@final
 class ThesisScenario(eqx.Module):
     """A simulated experiment set: the 1 kHz truth and the 30 Hz camera measurements.
 
@@ -276,6 +278,7 @@ def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> Unkno
     )
 
 
+@final
 class StructureRun(eqx.Module):
     """One set: times, true and estimated positions (metres, camera frame), RMS window."""
 

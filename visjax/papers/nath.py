@@ -17,6 +17,8 @@ up to 0.1 m and 0.1 rad at 0.2-0.5 Hz. `exciting=False` gives pure translation a
 optical axis (a trajectory that does not excite the regressors).
 """
 
+from typing import final
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -35,6 +37,7 @@ from ..geometry import camera_parameters, intrinsics_eq4, so3_exp
 from ..sim import add_pixel_noise, platform_camera_pixels, sample_times
 
 
+@final
 class UncalibratedScenario(eqx.Module):
     """Measured: `ts`, `R_b` (N,3,3), `x_b` (N,3), `p_s` (N,n,2), `p_c` (N,m,2), `omega_c`
     (m,3). Truth: `omega_s` (n,3), `A`, `R_c`, `x_c`, `theta_c1`, `theta_c2`."""
@@ -125,6 +128,7 @@ DEFAULT_GAINS = {
 }
 
 
+@final
 class EuclideanRun(eqx.Module):
     """Times, estimated and true unknown feature positions (m), prediction errors (px), the
     PE measure, depth estimates, the minimum eigenvalue of Gamma_c and the reset count."""

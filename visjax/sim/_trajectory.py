@@ -1,6 +1,7 @@
 """Trajectories: the pose and twist of a rigid body over time."""
 
 from collections.abc import Callable
+from typing import final
 
 import equinox as eqx
 import jax
@@ -11,6 +12,7 @@ from .._util import as_float, check_shape
 from ..kinematics import integrate_pose
 
 
+@final
 class Trajectory(eqx.Module):
     """A rigid body's pose and twist at sample times.
 
