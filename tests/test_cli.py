@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import pytest
 
@@ -19,9 +20,66 @@ def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
     assert (tmp_path / "geometry.png").stat().st_size > 10_000
 
 
-def test_geometry_rejects_too_few_points(capsys):
-    assert main(["geometry", "--points", "3"]) == 2
-    assert "at least 4" in capsys.readouterr().err
+BAD_OPTIONS = [
+    ["geometry", "--points", "3"],
+    ["geometry", "--scenes", "0"],
+    ["geometry", "--noise", "-1"],
+    ["geometry", "--scenes", "many"],
+    ["velocity", "--duration", "-1"],
+    ["velocity", "--duration", "0"],
+    ["velocity", "--duration", "nan"],
+    ["velocity", "--duration", "inf"],
+    ["velocity", "--rate", "0"],
+    ["velocity", "--rate", "-5"],
+    ["velocity", "--noise", "-1"],
+    ["velocity", "--noise", "nan"],
+    ["velocity", "--duration", "0.001"],
+    ["velocity", "--K", "1 2 3"],
+    ["velocity", "--rho", "1 1 1 1 1 nan"],
+    ["velocity", "--seed", "-3"],
+    ["structure", "--set", "III.9"],
+    ["structure", "--duration", "0"],
+    ["structure", "--noise", "-0.1"],
+    ["euclidean", "--noise-px", "-1"],
+    ["euclidean", "--duration", "-2"],
+    ["reproduce", "--bogus"],
+]
+
+
+@pytest.mark.parametrize("argv", BAD_OPTIONS, ids=" ".join)
+def test_bad_options_give_one_line_and_exit_2(argv, capsys, tmp_path):
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as e:
+        main(argv + ["--out", str(out)])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("visjax: error:") and err.count("\n") == 1, err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+def test_out_that_is_a_file_is_refused_before_any_work(capsys, tmp_path):
+    target = tmp_path / "a_file"
+    target.write_text("keep me")
+    with pytest.raises(SystemExit) as e:
+        main(["velocity", "--out", str(target)])
+    assert e.value.code == 2 and "not a folder" in capsys.readouterr().err
+    assert target.read_text() == "keep me"
+
+
+def test_a_failing_command_leaves_nothing_behind(tmp_path, monkeypatch):
+    from visjax import report
+
+    def half_written(*args, out=None, **kwargs):
+        (Path(out) / "summary.json").write_text("{}")
+        raise RuntimeError("the simulation failed")
+
+    monkeypatch.setattr(report, "euclidean_report", half_written)
+    out = tmp_path / "out"
+    with pytest.raises(RuntimeError, match="simulation failed"):
+        main(["euclidean", "--out", str(out)])
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == []  # no staging folder either
 
 
 def test_velocity_command(tmp_path, capsys):
@@ -68,8 +126,6 @@ def test_structure_command(tmp_path, capsys):
     assert len(summary["II.2"]["rms"]) == 3
     assert max(summary["I.1"]["rms"]) < 0.05  # metres, static point, 0.1 px
     assert (tmp_path / "structure_I.1.png").stat().st_size > 20_000
-    with pytest.raises(SystemExit):
-        main(["structure", "--set", "III.9"])
 
 
 def test_euclidean_command(tmp_path, capsys):

@@ -6,6 +6,8 @@ kept, never dropped.
 """
 
 import diffrax
+import jax
+import jax.numpy as jnp
 
 
 class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
@@ -34,6 +36,14 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "No homography decomposition places the reference points in front of the camera."
     )
     singular_jacobian = "The kinematics Jacobian J (seed 000, eq. (33)) is singular or not finite."
+    invalid_intrinsics = (
+        "The intrinsic matrix (or another camera or plane parameter) is not finite, or the "
+        "intrinsics are not invertible (a zero focal length)."
+    )
+    nonfinite_output = (
+        "The computation produced a non-finite value from finite inputs: a degenerate "
+        "configuration that no other check named."
+    )
     nonfinite_state = (
         "The estimator state became non-finite (NaN or inf); `Solution.failed_sample` is the "
         "sample held when it happened."
@@ -63,3 +73,19 @@ def raise_or_keep(result, x, throw: bool):
     if throw:
         return result.error_if(x, result != RESULTS.successful)
     return x
+
+
+def all_finite(tree):
+    """Whether every floating entry of a pytree is finite. An explicit `isfinite` test, so
+    that no reduction can drop a NaN (XLA's CPU `max` can, in large `vmap` batches)."""
+    leaves = [
+        jnp.all(jnp.isfinite(x))
+        for x in jax.tree_util.tree_leaves(tree)
+        if jnp.issubdtype(jnp.result_type(x), jnp.inexact)
+    ]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.array(True)
+
+
+def intrinsics_ok(A):
+    """A usable intrinsic matrix: finite, with non-zero focal lengths (invertible, eq. (15))."""
+    return jnp.all(jnp.isfinite(A)) & (A[0, 0] != 0.0) & (A[1, 1] != 0.0) & (A[2, 2] != 0.0)

@@ -2,7 +2,12 @@
 (`visjax.report`)."""
 
 import argparse
+import math
+import os
+import shutil
 import sys
+import tempfile
+from pathlib import Path
 
 from . import report
 
@@ -11,12 +16,56 @@ RHO_DEFAULT = "100 100 10 1 1 1"
 
 
 def _six(text: str) -> list[float]:
-    values = [float(x) for x in text.replace(",", " ").split()]
-    if len(values) != 6 or not all(v > 0 for v in values):
+    try:
+        values = [float(x) for x in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) != 6 or not all(math.isfinite(v) and v > 0 for v in values):
         raise argparse.ArgumentTypeError(
             f"expected six positive numbers (the diagonal), got {text!r}"
         )
     return values
+
+
+def _number(kind, test, what):
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not (math.isfinite(value) and test(value)):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+        return value
+
+    return parse
+
+
+_positive = _number(float, lambda v: v > 0, "a positive number")
+_nonnegative = _number(float, lambda v: v >= 0, "a non-negative number")
+_count = _number(int, lambda v: v >= 1, "a positive integer")
+_points = _number(int, lambda v: v >= 4, "an integer of at least 4")
+_seed = _number(int, lambda v: v >= 0, "a non-negative integer")
+
+
+class _Parser(argparse.ArgumentParser):
+    """Errors as one line, `visjax: error: ...`, exit status 2, no usage block."""
+
+    def error(self, message):
+        self.exit(2, f"visjax: error: {message}\n")
+
+
+def _check_out(out) -> None:
+    """`--out` must be a folder that can be created or written, checked before any work."""
+    if out is None:
+        return
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"--out {out!r} exists and is not a folder")
+    parent = path if path.exists() else path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"--out {out!r}: {str(parent)!r} is not writable")
 
 
 def _run_geometry(a):
@@ -42,18 +91,16 @@ def _run_reproduce(a):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="visjax", description="Vision-based nonlinear estimators in JAX."
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(prog="visjax", description="Vision-based nonlinear estimators in JAX.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     g = sub.add_parser(
         "geometry",
         help="homography estimation and decomposition: visjax vs OpenCV vs ground truth",
     )
-    g.add_argument("--scenes", type=int, default=100, help="random planar scenes (default 100)")
-    g.add_argument("--points", type=int, default=4, help="points per scene, >= 4 (default 4)")
-    g.add_argument("--noise", type=float, default=0.0, help="pixel noise sigma in px (default 0)")
-    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--scenes", type=_count, default=100, help="random planar scenes (default 100)")
+    g.add_argument("--points", type=_points, default=4, help="points per scene, >= 4 (default 4)")
+    g.add_argument("--noise", type=_nonnegative, default=0.0, help="pixel noise sigma (default 0)")
+    g.add_argument("--seed", type=_seed, default=0)
     g.add_argument("--out", type=str, default=None, help="directory for summary.json and figure")
     g.set_defaults(func=_run_geometry)
 
@@ -61,10 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
         "velocity",
         help="seed 000: the fixed-camera velocity estimator on the section-6 simulation",
     )
-    v.add_argument("--duration", type=float, default=10.0, help="seconds (default 10)")
-    v.add_argument("--rate", type=float, default=1000.0, help="sample rate in Hz (default 1000)")
-    v.add_argument("--noise", type=float, default=0.0, help="pixel noise sigma in px (default 0)")
-    v.add_argument("--seed", type=int, default=0, help="noise seed")
+    v.add_argument("--duration", type=_positive, default=10.0, help="seconds (default 10)")
+    v.add_argument(
+        "--rate", type=_positive, default=1000.0, help="sample rate in Hz (default 1000)"
+    )
+    v.add_argument("--noise", type=_nonnegative, default=0.0, help="pixel noise sigma (default 0)")
+    v.add_argument("--seed", type=_seed, default=0, help="noise seed")
     v.add_argument(
         "--K", type=_six, default=_six(K_DEFAULT), help=f'diagonal of K (default "{K_DEFAULT}")'
     )
@@ -83,11 +132,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="seed 003: the unknown input observer on simulated analogues of the thesis' sets",
     )
     st.add_argument("--set", action="append", help="I.1 ... II.3 (repeatable; default: all)")
-    st.add_argument("--duration", type=float, default=30.0, help="seconds per set (default 30)")
+    st.add_argument("--duration", type=_positive, default=30.0, help="seconds per set (default 30)")
     st.add_argument(
-        "--noise", type=float, default=0.1, help="pixel noise sigma in px (default 0.1)"
+        "--noise", type=_nonnegative, default=0.1, help="pixel noise sigma in px (default 0.1)"
     )
-    st.add_argument("--seed", type=int, default=0)
+    st.add_argument("--seed", type=_seed, default=0)
     st.add_argument("--out", type=str, default=None, help="directory for figures and summary")
     st.add_argument("--quiet", action="store_true", help="no progress bar")
     st.set_defaults(func=_run_structure)
@@ -96,9 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
         "euclidean",
         help="seed 004: Euclidean positions from an uncalibrated moving camera (adaptive LS)",
     )
-    eu.add_argument("--noise-px", type=float, default=0.0, help="pixel noise sigma (default 0)")
-    eu.add_argument("--duration", type=float, default=30.0, help="seconds (default 30)")
-    eu.add_argument("--seed", type=int, default=0)
+    eu.add_argument("--noise-px", type=_nonnegative, default=0.0, help="pixel noise (default 0)")
+    eu.add_argument("--duration", type=_positive, default=30.0, help="seconds (default 30)")
+    eu.add_argument("--seed", type=_seed, default=0)
     eu.add_argument("--out", type=str, default=None, help="directory for figure and summary")
     eu.add_argument("--quiet", action="store_true", help="no progress bar")
     eu.set_defaults(func=_run_euclidean)
@@ -112,19 +161,62 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Parse and validate every option before any work (one line and exit status 2 on a
+    bad one), then run the command into a temporary folder beside `--out` and move its
+    files into place only when it succeeded: a failure leaves nothing half-written."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    if getattr(args, "points", 4) < 4:
-        print("visjax: --points must be at least 4", file=sys.stderr)
-        return 2
     if args.command == "structure":
         from .papers.jang import SETS
 
         for name in args.set or ():
             if name not in SETS:
                 parser.error(f"unknown set {name!r}; choose from {list(SETS)}")
-    args.func(args)
+    if (
+        args.command in ("velocity", "euclidean")
+        and args.duration * getattr(args, "rate", 1000.0) < 2
+    ):
+        parser.error("--duration times the rate must give at least 2 samples")
+    try:
+        _check_out(args.out)
+    except argparse.ArgumentTypeError as e:
+        parser.error(str(e))
+    if args.out is None:
+        args.func(args)
+        return 0
+    final = Path(args.out)
+    anchor = final if final.exists() else final.parent
+    while not anchor.exists():
+        anchor = anchor.parent
+    staging = Path(tempfile.mkdtemp(prefix=".visjax-", dir=anchor))
+    stdout = sys.stdout
+    try:
+        args.out = str(staging)
+        sys.stdout = _Renaming(stdout, str(staging), str(final))  # print the final paths
+        args.func(args)
+        final.mkdir(parents=True, exist_ok=True)
+        for item in staging.iterdir():
+            target = final / item.name
+            if target.is_dir():
+                shutil.rmtree(target)
+            os.replace(item, target)
+    finally:
+        sys.stdout = stdout
+        shutil.rmtree(staging, ignore_errors=True)
     return 0
+
+
+class _Renaming:
+    """A text stream that writes the final output folder where the staging one is named."""
+
+    def __init__(self, stream, old: str, new: str):
+        self.stream, self.old, self.new = stream, old, new
+
+    def write(self, text):
+        return self.stream.write(text.replace(self.old, self.new))
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
 
 
 if __name__ == "__main__":

@@ -53,5 +53,8 @@ def test_bad_input():
         design_uio(np.eye(2), C, np.ones((3, 1)), 1.0)
     with pytest.raises(ValueError, match="rank\\(CD\\)"):
         design_uio(np.eye(3), C, np.array([[0.0], [0.0], [1.0]]), 1.0)
+    s = SETS["I.1"]
     with pytest.raises(ValueError, match="positive"):
-        design_uio(np.eye(3), C, np.array([[1.0], [0.0], [0.0]]), -1.0)
+        design_uio(np.array(s.A, float), C, np.array(s.D, float)[:, None], -1.0)
+    with pytest.raises(ValueError, match=r"rank condition \(3.20\)"):
+        design_uio(np.zeros((3, 3)), C, np.array([[1.0], [0.0], [0.0]]), 1.0)

@@ -152,3 +152,25 @@ def test_30hz_frames_with_dt_equal_the_held_1khz_stream():
     np.testing.assert_allclose(cam.states.z, held.states.z[:m], rtol=1e-12)
     with pytest.raises(ValueError, match="exceeds the Euler stability bound"):
         run(observer_for("I.2"), sc.camera_stream(), dt=2.0)
+
+
+def test_the_rank_condition_is_checked_by_the_observer_and_the_design():
+    from visjax.design import design_uio
+
+    s = SETS["I.1"]
+    good = observer_for("I.1")
+    assert bool(good._rank_condition())
+    A0 = jnp.zeros((3, 3))  # (M0 A, C) unobservable
+    bad = eqx.tree_at(lambda o: o.A, good, A0)
+    assert not bool(bad._rank_condition())
+    failing = [message for ok, message in bad.checks() if not bool(ok)]
+    assert any("rank condition (3.20)" in message for message in failing)
+    stream = moving_camera_scenario("I.1", 0.05).held_stream()
+    with pytest.raises(ValueError, match="UnknownInputObserver"):
+        run(bad, stream)
+    with pytest.raises(ValueError, match=r"rank condition \(3.20\)"):
+        design_uio(np.zeros((3, 3)), C, np.array(s.D, float)[:, None], 1.0)
+    # the JAX check agrees with the NumPy one on the thesis' sets
+    for name in SETS:
+        o = observer_for(name)
+        assert bool(o._rank_condition()) == rank_condition(o.A, o.C, o.D)

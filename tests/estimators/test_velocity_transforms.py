@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from tests.helpers import central_difference
 from visjax.estimators import depth_from_known_length, diagonal_intersection, kinematics_jacobian
@@ -38,3 +39,26 @@ def test_kinematics_jacobian_grad():
     np.testing.assert_allclose(
         jax.jit(jax.jacfwd(f))(x0), central_difference(f, x0, 1e-6), rtol=1e-6, atol=1e-6
     )
+
+
+def test_depth_recovery_refuses_a_broken_premise():
+    """An irregular quadrilateral whose plane misses the object origin by 2 cm: version 1
+    returned z1* = 0.706 (true 1.302) without a word; now the residual of R* s1 = d* w
+    is checked and it raises."""
+    from visjax.geometry import project
+    from visjax.papers.chitrakaran import A_EQ62, R_STAR_EQ61
+
+    A, R_star = jnp.array(A_EQ62), jnp.array(R_STAR_EQ61)
+    x_f_star = jnp.array([0.0, 0.0, 1.3])
+    s = jnp.array([[-0.1, 0.12, 0.02], [0.13, 0.1, 0.02], [0.09, -0.1, 0.02], [-0.12, -0.08, 0.02]])
+    p_ref = project(x_f_star[None, :] + s @ R_star.T, A)
+    n_star = R_star @ jnp.array([0.0, 0.0, 1.0])
+    n_star = jnp.where(n_star @ (x_f_star + R_star @ s[0]) > 0, n_star, -n_star)
+    with pytest.raises(RuntimeError, match="does not hold"):
+        depth_from_known_length(p_ref[0], diagonal_intersection(p_ref), A, n_star, R_star, s[0])
+    # the section-6 square (a parallelogram centred on the origin) passes, exactly
+    sc = fixed_camera_scenario(0.01, 1000.0)
+    z1 = depth_from_known_length(
+        sc.pixels[0, 0], diagonal_intersection(sc.pixels[0]), sc.A, sc.n_star, sc.R_star, sc.s[0]
+    )
+    np.testing.assert_allclose(z1, sc.z1_star, rtol=1e-10)

@@ -13,6 +13,7 @@ import numpy as np
 
 from visjax.geometry import (
     L_omega,
+    camera_matrix_lstsq,
     decompose_homography,
     decompose_homography_known_normal,
     euclidean_reconstruction,
@@ -56,6 +57,15 @@ def main() -> dict:
     out["known_normal_R"] = float(np.max(np.abs(Rk - sc.R_bar)))
     out["known_normal_x"] = float(np.max(np.abs(xk - sc.x_h)))
     out["dtypes"] += [str(R.dtype), str(Rk.dtype)]
+    # any scale of H: version 1 returned NaN for H scaled by 1e10 or 1e-10 in float32
+    out["known_normal_scaled"] = 0.0
+    for k in (1e10, 1e-10, 1e15, 1e-15):
+        Rk, xk = jax.vmap(decompose_homography_known_normal)(f32(k * sc.H), f32(sc.n_star))
+        out["known_normal_scaled"] = max(
+            out["known_normal_scaled"],
+            float(np.max(np.abs(Rk - sc.R_bar))),
+            float(np.max(np.abs(xk - sc.x_h))),
+        )
 
     # reconstruction, general and known-normal paths
     sc = random_planar_scenes(100, 4, seed=31)
@@ -94,6 +104,20 @@ def main() -> dict:
         np.all(np.isfinite(jax.jacrev(so3_log)(jnp.eye(3, dtype=jnp.float32))))
     )
     out["dtypes"] += [str(Rs.dtype), str(back.dtype), str(jax.vmap(L_omega)(omegas).dtype)]
+    # camera least squares: an axis with no variation is detected in float32 too, and the
+    # centred solve is accurate on offset, narrow data
+    m = f32(np.random.default_rng(0).uniform(-0.3, 0.3, (50, 2)))
+    p = m * f32([550.0, 730.0]) + f32([300.0, 330.0])
+    flat = m.copy()
+    flat[:, 1] = 0.25
+    try:
+        camera_matrix_lstsq(flat, p)
+        out["lstsq_flat_axis_detected"] = False
+    except RuntimeError:
+        out["lstsq_flat_axis_detected"] = True
+    narrow = f32(0.5 + 1e-2 * m)
+    theta = camera_matrix_lstsq(narrow, narrow * f32(550.0) + f32(300.0))
+    out["lstsq_narrow_rel"] = float(np.max(np.abs(np.asarray(theta[:2]) / 550.0 - 1.0)))
     return out
 
 

@@ -83,6 +83,11 @@ def test_bad_settings():
     for gain in ("alpha_c", "alpha", "gamma_s0"):
         with pytest.raises(ValueError, match=f"`{gain}` must be positive"):
             run(initial_estimator(sc, {gain: -1.0}), stream(sc))
+    with pytest.raises(ValueError, match="projection margins"):
+        run(initial_estimator(sc, {"eps_s": -0.1}), stream(sc))
+    zero_D = eqx.tree_at(lambda e: e.D, initial_estimator(sc), jnp.zeros(16))
+    with pytest.raises(ValueError, match="`D`"):
+        run(zero_D, stream(sc))
     with pytest.raises(ValueError, match="known features"):
         platform_measurements(sc.R_b, sc.x_b, sc.p_s, sc.p_c, sc.omega_c[:2])
 

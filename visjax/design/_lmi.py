@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..estimators import rank_condition
+
 _MARGIN = 1e-6
 
 
@@ -57,6 +59,12 @@ def _as_arrays(A, C, D):
         )
     if np.linalg.matrix_rank(C @ D) != 1:
         raise ValueError("rank(CD) must be 1 (seed 003, section 3.4): this D is not seen by C.")
+    if not rank_condition(A, C, D):
+        raise ValueError(
+            "(A, C, D) fails the rank condition (3.20) of Jang's thesis: rank [sI - A, D; C, 0]"
+            " < 4 for some s, i.e. (M0 A, C) is not observable. No UIO gain exists, whatever "
+            "the Lipschitz bound."
+        )
     return A, C, D
 
 

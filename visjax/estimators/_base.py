@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
-from .._results import RESULTS
+from .._results import RESULTS, all_finite
 
 
 class AbstractEstimator(eqx.Module):
@@ -297,15 +297,6 @@ def _precheck(estimator, y0, h_max, solver):
             )
 
 
-def _all_finite(tree) -> Bool[Array, ""]:
-    leaves = [
-        jnp.all(jnp.isfinite(x))
-        for x in jax.tree_util.tree_leaves(tree)
-        if jnp.issubdtype(jnp.result_type(x), jnp.inexact)
-    ]
-    return jnp.all(jnp.stack(leaves)) if leaves else jnp.array(True)
-
-
 def _scan(f, carry, length: int, adjoint: AbstractAdjoint):
     """`lax.scan(f, carry, None, length)`, checkpointed in blocks for `CheckpointAdjoint`."""
     if isinstance(adjoint, DirectAdjoint) or length < 4:
@@ -432,9 +423,9 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
     if isinstance(solver, diffrax.Euler):
         stable = h_max <= jax.lax.stop_gradient(estimator.max_stable_dt(y0))
     r = RESULTS.successful
-    r = RESULTS.where(~(_all_finite(state) & estimator.valid(state, y0)), RESULTS.diverged, r)
-    r = RESULTS.where(~_all_finite(state), RESULTS.nonfinite_state, r)
-    r = RESULTS.where(~_all_finite(y0), RESULTS.nonfinite_measurement, r)
+    r = RESULTS.where(~(all_finite(state) & estimator.valid(state, y0)), RESULTS.diverged, r)
+    r = RESULTS.where(~all_finite(state), RESULTS.nonfinite_state, r)
+    r = RESULTS.where(~all_finite(y0), RESULTS.nonfinite_measurement, r)
     r = RESULTS.where(~stable, RESULTS.unstable_step, r)
     r = RESULTS.where(~settings_ok, RESULTS.invalid_settings, r)
     failed = jnp.where(r == RESULTS.successful, -1, 0).astype(jnp.int32)
@@ -473,11 +464,11 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
         s_new, _, _, _, solver_r = solver.step(term, t0, t1, state, y, solver_state, False)
         code = RESULTS.successful
         code = RESULTS.where(~estimator.valid(s_new, y), RESULTS.diverged, code)
-        code = RESULTS.where(~_all_finite(s_new), RESULTS.nonfinite_state, code)
+        code = RESULTS.where(~all_finite(s_new), RESULTS.nonfinite_state, code)
         code = RESULTS.where(
             solver_r == diffrax.RESULTS.successful, code, RESULTS.promote(solver_r)
         )
-        code = RESULTS.where(_all_finite(y), code, RESULTS.nonfinite_measurement)
+        code = RESULTS.where(all_finite(y), code, RESULTS.nonfinite_measurement)
         newly = (failed < 0) & (code != RESULTS.successful)
         r = RESULTS.where(newly, code, r)
         failed = jnp.where(newly, k, failed).astype(jnp.int32)

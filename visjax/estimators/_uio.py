@@ -172,11 +172,29 @@ class UnknownInputObserver(AbstractEstimator):
         _, _, N, _ = self._matrices()
         return jnp.linalg.eigvals(jax.lax.stop_gradient(N))
 
+    def _rank_condition(self):
+        """(3.20) in JAX, for the checks under `jit` and `vmap`: with rank(CD) = 1 it holds
+        exactly when $(M_0 A, C)$ is observable, $M_0 = I_3 - D(CD)^+C$ (`rank_condition`).
+        With $D = 0$ (no unknown input: the ordinary observer) $(A, C)$ must be observable."""
+        A, C, D = (jax.lax.stop_gradient(m) for m in (self.A, self.C, self.D))
+        CD = C @ D
+        M0 = jnp.eye(3, dtype=A.dtype) - D @ _pinv_col(CD) @ C
+        MA = M0 @ A
+        obs = jnp.concatenate([C, C @ MA, C @ MA @ MA])
+        sv = jnp.linalg.svd(obs, compute_uv=False)
+        tol = 6.0 * jnp.finfo(A.dtype).eps * sv[0]
+        no_input = jnp.all(D == 0.0)
+        return (sv[-1] > tol) & (no_input | (jnp.sum(CD**2) > 0.0))
+
     def checks(self):
         lam = self._N_eigenvalues()
         return (
             (jnp.max(jnp.real(lam)) < 0, "`N` = M A - K C must be Hurwitz (chapter 3)."),
             (self.x3_guess > 0, "`x3_guess` (the initial 1/Z) must be positive."),
+            (
+                self._rank_condition(),
+                "(A, C, D) must satisfy the rank condition (3.20) and rank(CD) = rank(D).",
+            ),
         )
 
     def max_stable_dt(self, y=None):

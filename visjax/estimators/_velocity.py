@@ -149,9 +149,11 @@ def velocity_measurements(
     check_shape(s1, (3,), "s1")
     rec = euclidean_reconstruction(p_ref, p_cur, A, n_star=n_star, throw=False)
     p_cur = as_float(p_cur)
-    e = error_signal(p_cur[0], p_ref[0], rec.alpha[0], rec.R_bar)
+    # a failed frame is reported by its result (and NaN-filled below), never by so3_log
+    R_bar = jnp.where(rec.result == RESULTS.successful, rec.R_bar, jnp.eye(3, dtype=A.dtype))
+    e = error_signal(p_cur[0], p_ref[0], rec.alpha[0], R_bar)
     m1 = pixel_to_normalized(p_cur[0], A)
-    J, J_inv = kinematics_jacobian(A, m1, rec.alpha[0], z1_star, rec.R_bar @ R_star, s1, e[3:])
+    J, J_inv = kinematics_jacobian(A, m1, rec.alpha[0], z1_star, R_bar @ R_star, s1, e[3:])
     ok = jnp.all(jnp.isfinite(J_inv)) & jnp.all(jnp.isfinite(J))
     result = RESULTS.where(
         rec.result != RESULTS.successful,
@@ -171,6 +173,8 @@ def depth_from_known_length(
     n_star: Float[ArrayLike, "3"],
     R_star: Float[ArrayLike, "3 3"],
     s1: Float[ArrayLike, "3"],
+    *,
+    residual_tol: float = 1e-2,
 ) -> Float[Array, ""]:
     """The reference depth $z_1^*$ of feature 1 from the known vector $s_1$ (replaces eq. (56)).
 
@@ -198,7 +202,11 @@ def depth_from_known_length(
     - `A`, `n_star`, `R_star`, `s1`: intrinsics, plane normal, reference orientation,
         feature 1 in the object frame.
 
-    **Returns:** $z_1^*$ (a runtime error if it is not positive).
+    - `residual_tol`: the largest relative residual $\\|R^* s_1 - d^* w\\| / \\|s_1\\|$ accepted
+        (noise-free it is 0; 0.1 px of noise leaves about 1e-4). Above it the premise does
+        not hold and the function raises instead of returning a wrong $z_1^*$.
+
+    **Returns:** $z_1^*$ (a runtime error if it is not positive or the residual is too large).
     """
     p1_ref, p0_ref, A, n_star, R_star, s1 = (
         as_float(x) for x in (p1_ref, p0_ref, A, n_star, R_star, s1)
@@ -212,8 +220,19 @@ def depth_from_known_length(
     m0 = to_homogeneous(pixel_to_normalized(p0_ref, A))
     n = n_star / jnp.linalg.norm(n_star)
     w = m1 / (n @ m1) - m0 / (n @ m0)
-    d_star = (w @ (R_star @ s1)) / (w @ w)
+    Rs1 = R_star @ s1
+    d_star = (w @ Rs1) / (w @ w)
     z1 = d_star / (n @ m1)
+    # R* s1 = d* w is three equations for one unknown: their residual says whether the
+    # premise holds (the origin's pixel is the image of the object origin, on the plane)
+    residual = jnp.linalg.norm(Rs1 - d_star * w) / jnp.linalg.norm(Rs1)
+    z1 = eqx.error_if(
+        z1,
+        ~(residual <= residual_tol),
+        "depth recovery: R* s1 = d* w does not hold (relative residual above `residual_tol`):"
+        " `p0_ref` is not the image of the object origin on the feature plane (for"
+        " `diagonal_intersection`, the features must be a parallelogram centred on it).",
+    )
     return eqx.error_if(z1, ~(z1 > 0.0), "depth recovery gave z1* <= 0: check s1, R*, n*.")
 
 

@@ -11,7 +11,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._util import as_float
+from .._util import as_float, check_shape
 
 
 def camera_matrix_lstsq(
@@ -20,8 +20,9 @@ def camera_matrix_lstsq(
     """$\\hat\\theta = [f, af, c_x, c_y]$ by least squares from normalized coordinates `m` and
     pixels `p` of the same points (seed 003, section 2.3).
 
-    Raises at run time if the normalized coordinates do not vary along an axis (the
-    regression is then singular).
+    Raises at run time if a coordinate is not finite, or if the normalized coordinates do
+    not vary along an axis (the regression is then singular). Each axis is solved from
+    centred sums.
     """
     m, p = as_float(m), as_float(p)
     if m.ndim != 2 or m.shape[-1] != 2 or m.shape != p.shape or m.shape[0] < 2:
@@ -30,16 +31,26 @@ def camera_matrix_lstsq(
         )
 
     def axis(x, y):
+        # centred sums: the raw normal equations lose digits on offset, narrow data
         n = x.shape[0]
-        sxx, sx, sxy, sy = jnp.sum(x * x), jnp.sum(x), jnp.sum(x * y), jnp.sum(y)
-        det = n * sxx - sx * sx
-        det = eqx.error_if(
-            det,
-            ~(det > 1e-12 * n * sxx),
+        x_mean, y_mean = jnp.mean(x), jnp.mean(y)
+        dx, dy = x - x_mean, y - y_mean
+        sxx = jnp.sum(dx * dx)
+        # no variation: below what rounding the mean leaves (dtype-aware, not a fixed 1e-12)
+        floor = n * (100.0 * jnp.finfo(x.dtype).eps * jnp.max(jnp.abs(x))) ** 2
+        sxx = eqx.error_if(
+            sxx,
+            ~(sxx > floor),
             "camera_matrix_lstsq: the normalized coordinates do not vary along an axis.",
         )
-        return (n * sxy - sx * sy) / det, (sxx * sy - sx * sxy) / det
+        slope = jnp.sum(dx * dy) / sxx
+        return slope, y_mean - slope * x_mean
 
+    m, p = eqx.error_if(
+        (m, p),
+        ~(jnp.all(jnp.isfinite(m)) & jnp.all(jnp.isfinite(p))),
+        "camera_matrix_lstsq: a coordinate is not finite (NaN or inf).",
+    )
     f, cx = axis(m[:, 0], p[:, 0])
     af, cy = axis(m[:, 1], p[:, 1])
     return jnp.stack([f, af, cx, cy])
@@ -48,6 +59,7 @@ def camera_matrix_lstsq(
 def camera_matrix(theta: Float[ArrayLike, "4"]) -> Float[Array, "3 3"]:
     """$K_c$ from $\\theta = [f, af, c_x, c_y]$ (seed 003, section 2.2)."""
     theta = as_float(theta)
+    check_shape(theta, (4,), "theta")
     f, af, cx, cy = theta[0], theta[1], theta[2], theta[3]
     z, o = jnp.zeros_like(f), jnp.ones_like(f)
     return jnp.stack([jnp.stack([f, z, cx]), jnp.stack([z, af, cy]), jnp.stack([z, z, o])])

@@ -11,7 +11,7 @@ Arrays of points have the point index first: shape (n, 2) or (n, 3).
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._results import RESULTS, raise_or_keep
+from .._results import RESULTS, intrinsics_ok, raise_or_keep
 from .._util import as_float, check_shape
 
 
@@ -70,15 +70,20 @@ def pixel_to_normalized(
     - `p`: pixel coordinates, shape (..., 2).
     - `A`: the intrinsic matrix.
 
+    No error path: a non-finite pixel gives NaN coordinates (NaN in, NaN out), and so does
+    an unusable `A` (non-finite, or a zero focal length), never a finite value.
+
     **Returns:** $[x, y]$ of $m = [x, y, 1]^T$, shape (..., 2).
     """
     p = _check_last(p, 2, "p")
     A = _check_A(A)
+    ok = intrinsics_ok(A)
+    A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))  # no inf, no NaN gradient
     fx, s, cx = A[0, 0], A[0, 1], A[0, 2]
     fy, cy = A[1, 1], A[1, 2]
     y = (p[..., 1] - cy) / fy
     x = (p[..., 0] - cx - s * y) / fx
-    return jnp.stack([x, y], axis=-1)
+    return jnp.where(ok, jnp.stack([x, y], axis=-1), jnp.nan)
 
 
 def normalized_to_pixel(
@@ -108,8 +113,9 @@ def project(points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"]) -> Fl
     - `points`: $\\bar m = [x, y, z]$ in the camera frame, shape (..., 3).
     - `A`: the intrinsic matrix.
 
-    A point with depth $z \\le 0$ ("behind the camera") or a non-finite point raises at
-    run time; `project_checked` returns a result code instead.
+    A point with depth $z \\le 0$ ("behind the camera"), a non-finite point or an unusable
+    `A` (non-finite, a zero focal length) raises at run time; `project_checked` returns a
+    result code instead.
 
     **Returns:** pixel coordinates, shape (..., 2).
     """
@@ -132,11 +138,13 @@ def project_checked(
         RESULTS.nonfinite_pixels,
         RESULTS.where(bad_depth, RESULTS.behind_camera, RESULTS.successful),
     )
+    result = RESULTS.where(intrinsics_ok(A), result, RESULTS.invalid_intrinsics)
     # Keep the division finite for the points in front (and their gradients NaN-free).
     z_safe = jnp.where(z > 0.0, z, 1.0)
     m = points[..., :2] / z_safe[..., None]
     pixels = normalized_to_pixel(m, A)
     pixels = jnp.where((z > 0.0)[..., None], pixels, jnp.nan)
+    pixels = jnp.where(intrinsics_ok(A), pixels, jnp.nan)
     return pixels, result
 
 

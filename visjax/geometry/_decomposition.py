@@ -42,7 +42,8 @@ def _rotation_tol(dtype) -> float:
 
 
 def _det_sign(H):
-    return jnp.where(jnp.linalg.det(H) < 0.0, -1.0, 1.0).astype(H.dtype)
+    Hs, _ = _prescale(H)  # no overflow of the determinant in float32
+    return jnp.where(jnp.linalg.det(Hs) < 0.0, -1.0, 1.0).astype(H.dtype)
 
 
 def _decompose_core(H):
@@ -50,13 +51,20 @@ def _decompose_core(H):
 
     Returns `(R, t, n, scale, is_rotation)` with `H / scale = R[k] + t[k] n[k]^T` for each k.
     """
+    H, c = _prescale(H)
+    R, t, n, scale, is_rotation = _decompose_unscaled(H)
+    return R, t, n, scale * c, is_rotation
+
+
+def _decompose_unscaled(H):
     dtype = H.dtype
     eye = jnp.eye(3, dtype=dtype)
     M = H.T @ H
     cube = jnp.abs(jnp.linalg.det(H)) ** (1.0 / 3.0)
     cube = jnp.where(cube > 0.0, cube, 1.0)
     dev = jnp.max(jnp.abs(jax.lax.stop_gradient(M / cube**2) - eye))
-    is_rotation = dev < _rotation_tol(dtype)
+    # explicit finiteness: a max over a large vmap batch can drop a NaN
+    is_rotation = (dev < _rotation_tol(dtype)) & jnp.all(jnp.isfinite(M))
 
     # Generic branch, fed a harmless matrix when H is a rotation (double-where).
     M_safe = jnp.where(is_rotation, jnp.diag(jnp.array([4.0, 1.0, 0.25], dtype)), M)
@@ -150,8 +158,23 @@ def _inv_sqrt_2x2(S):
     return jnp.linalg.inv(root)
 
 
+def _prescale(H):
+    """`H / c` and `c`, c = max |H_ij|: the decompositions are invariant to the scale of
+    `H`, and `det`, `H^T H` of a matrix scaled by 1e10 or 1e-10 overflow or underflow in
+    float32. `c` is held constant for the derivative (exact, by that invariance)."""
+    c = jax.lax.stop_gradient(jnp.max(jnp.abs(H)))
+    c = jnp.where(c > 0.0, c, 1.0)
+    return H / c, c
+
+
 def _known_normal_core(H, n):
     """`(R, x_h, scale)` for `H` of positive scale and physical sign and a unit normal `n`."""
+    H, c = _prescale(H)
+    R, x_h, scale = _known_normal_unscaled(H, n)
+    return R, x_h, scale * c
+
+
+def _known_normal_unscaled(H, n):
     a, b = _plane_basis(n)
     Mab = H @ jnp.stack([a, b], axis=1)  # = [R a, R b] * scale for exact data
     S = Mab.T @ Mab

@@ -21,9 +21,11 @@ from ._camera import to_homogeneous
 
 def _rcond_tol(dtype) -> float:
     # Reject designs whose reciprocal condition number is below this. The relative error
-    # of the solution is about eps / rcond, so this caps it near sqrt(eps) (1.5e-8 in
-    # float64, 3e-4 in float32): beyond it, near-collinear points give garbage.
-    return float(jnp.finfo(dtype).eps) ** 0.5
+    # of the solution is about eps / rcond, and the decomposition amplifies it further:
+    # sqrt(eps) in float64 (1.5e-8: errors near 1e-8), eps^(1/3) in float32 (4.9e-3; with
+    # sqrt(eps), 3.4e-4, near-collinear points passed with errors in H up to 5e-2).
+    eps = float(jnp.finfo(dtype).eps)
+    return eps**0.5 if eps < 1e-10 else eps ** (1.0 / 3.0)
 
 
 def _normalising_transform(p):

@@ -13,7 +13,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._results import RESULTS, raise_or_keep
+from .._results import RESULTS, all_finite, intrinsics_ok, raise_or_keep
 from .._util import as_float, check_shape
 from ._camera import pixel_to_normalized, to_homogeneous
 from ._decomposition import _decompose_core, _known_normal_core, select_solution
@@ -140,6 +140,14 @@ def euclidean_reconstruction(
             RESULTS.behind_camera,
             RESULTS.where(physical, RESULTS.successful, RESULTS.no_physical_solution),
         ),
+    )
+    # The camera and plane parameters, and the outputs, are tested with an explicit
+    # isfinite: no reduction decides this code (XLA's CPU max can drop a NaN in a batch).
+    params_ok = intrinsics_ok(A) & all_finite((n_prior, n))
+    result = RESULTS.where(params_ok, result, RESULTS.invalid_intrinsics)
+    outputs_ok = all_finite((R, x_h, n, g33, alpha, G_n, Hs))
+    result = RESULTS.where(
+        (result == RESULTS.successful) & ~outputs_ok, RESULTS.nonfinite_output, result
     )
     out = Reconstruction(
         R_bar=R, x_h=x_h, n_star=n, g33=g33, alpha=alpha, G_n=G_n, H=H, result=result

@@ -93,6 +93,8 @@ def unknown_feature_regressors(
     they are $\\hat W$, $\\hat\\Pi$ of eq. (15)).
     """
     R_b, x_b, theta_c1, theta_c2 = (as_float(x) for x in (R_b, x_b, theta_c1, theta_c2))
+    check_shape(R_b, (3, 3), "R_b")
+    check_shape(x_b, (3,), "x_b")
     check_shape(theta_c1, (12,), "theta_c1")
     check_shape(theta_c2, (4,), "theta_c2")
     M, b = theta_c1[:9].reshape(3, 3), theta_c1[9:]
@@ -113,6 +115,8 @@ def known_feature_regressors(
     $\\Pi_{xj} = [q_j^T, 1]$. Measured signals only.
     """
     R_b, x_b, omega_c = as_float(R_b), as_float(x_b), as_float(omega_c)
+    check_shape(R_b, (3, 3), "R_b")
+    check_shape(x_b, (3,), "x_b")
     check_shape(omega_c, (3,), "omega_c")
     q = R_b.T @ (omega_c - x_b)
     eye = jnp.eye(3, dtype=q.dtype)
