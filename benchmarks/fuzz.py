@@ -222,9 +222,66 @@ def fuzz_so3(n, seed, dtype):
     return out
 
 
+def fuzz_decomposition(n, seed, dtype):
+    """`decompose_homography` and `decompose_homography_known_normal`: no error path, so
+    NaN in must give NaN out; a finite H must recompose (eq. (12)) and R be a rotation."""
+    import jax
+    import numpy as np
+
+    from visjax.geometry import decompose_homography, decompose_homography_known_normal
+    from visjax.sim import random_planar_scenes, rotation_from_vector
+
+    rng = np.random.default_rng(seed)
+    general = jax.jit(jax.vmap(lambda H: decompose_homography(H)))
+    known = jax.jit(jax.vmap(decompose_homography_known_normal))
+    tol = 1e-9 if dtype == "float64" else 1e-4
+    out = {}
+    for kind in KINDS:
+        sc = random_planar_scenes(n, 4, seed=seed)
+        H, n_star = sc.H.copy(), sc.n_star.copy()
+        if kind == "near_degenerate":  # near pure rotations and near the identity, any scale
+            R = np.stack([rotation_from_vector(w) for w in rng.normal(size=(n, 3)) * 0.3])
+            small = (10.0 ** rng.uniform(-9, -4, n))[:, None, None]
+            H = R + small * np.einsum("ni,nj->nij", rng.normal(size=(n, 3)), n_star)
+            H *= (10.0 ** rng.uniform(-8, 8, n))[:, None, None]
+        elif kind == "invalid":
+            H[np.arange(n), rng.integers(0, 3, n), rng.integers(0, 3, n)] = rng.choice(
+                [np.nan, np.inf, -np.inf], n
+            )
+        Hd = np.asarray(H, dtype)
+        Rs, ts, ns = (np.asarray(x, float) for x in general(Hd))
+        Rk, xk = (np.asarray(x, float) for x in known(Hd, np.asarray(n_star, dtype)))
+        c_gen, c_known = _counts(), _counts()
+        if kind == "invalid":
+            for c, outs in ((c_gen, (Rs, ts, ns)), (c_known, (Rk, xk))):
+                all_nan = np.all([np.all(np.isnan(o.reshape(n, -1)), 1) for o in outs], 0)
+                c["result_code"] = int(np.sum(all_nan))  # NaN in, NaN out
+                c["silently_wrong"] = int(np.sum(~all_nan))
+        else:
+            Hn = H / np.linalg.svd(H, compute_uv=False)[:, 1:2, None]  # middle singular value 1
+            Hn *= np.sign(np.linalg.det(Hn))[:, None, None]
+            recomposed = Rs + ts[..., :, None] * ns[..., None, :]
+            err = np.max(np.abs(recomposed - Hn[:, None]), (1, 2, 3))
+            ortho = np.max(np.abs(np.einsum("nkji,nkjl->nkil", Rs, Rs) - np.eye(3)), (1, 2, 3))
+            finite = np.all(np.isfinite(recomposed.reshape(n, -1)), 1)
+            # near a pure rotation the method's documented accuracy is sqrt(eps) (the
+            # rotation branch's threshold balances the eigenvector method's eps / gap)
+            tol_gen = tol if kind == "well_posed" else 10.0 * float(np.finfo(dtype).eps) ** 0.5
+            _classify(np.ones(n, bool), finite, np.maximum(err, ortho), tol_gen, c_gen)
+            # known normal: R + x_h n^T is H up to its positive scale
+            a = Rk + xk[:, :, None] * np.asarray(n_star)[:, None, :]
+            unit = lambda M: M / np.linalg.norm(M, axis=(1, 2), keepdims=True)  # noqa: E731
+            err_k = np.max(np.abs(unit(a) - unit(Hn)), (1, 2))
+            finite_k = np.all(np.isfinite(Rk.reshape(n, -1)), 1) & np.all(np.isfinite(xk), 1)
+            _classify(np.ones(n, bool), finite_k, err_k, tol_gen, c_known)
+        out.setdefault("decompose_homography", {})[kind] = c_gen
+        out.setdefault("decompose_homography_known_normal", {})[kind] = c_known
+    return out
+
+
 def fuzz(n: int, seed: int, dtype: str) -> dict:
     results = {}
-    for part in (fuzz_reconstruction, fuzz_camera, fuzz_so3):
+    for part in (fuzz_reconstruction, fuzz_camera, fuzz_so3, fuzz_decomposition):
         results.update(part(n, seed, dtype))
     totals = _counts()
     for per_kind in results.values():

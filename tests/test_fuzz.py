@@ -28,7 +28,13 @@ def _check(report):
             assert counts["silently_wrong"] == 0, (name, kind, counts)
             if kind == "well_posed":
                 assert counts["correct"] == sum(counts.values()), (name, counts)
-    for name in ("euclidean_reconstruction", "project_checked", "so3_log"):
+    for name in (
+        "euclidean_reconstruction",
+        "project_checked",
+        "so3_log",
+        "decompose_homography",
+        "decompose_homography_known_normal",
+    ):
         assert report["functions"][name]["invalid"]["correct"] == 0, name
 
 

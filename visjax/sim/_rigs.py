@@ -6,6 +6,7 @@ from collections.abc import Callable
 import diffrax
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
 from .._util import as_float, check_shape
@@ -101,8 +102,6 @@ def hold_indices(n: int, rate_hz: int, camera_hz: int):
     """For each of `n` samples at `rate_hz`, the index of the latest camera frame at
     `camera_hz` (zero-order hold), and the fast-rate index of each frame; integer
     arithmetic, exact. NumPy, static."""
-    import numpy as np
-
     held = (np.arange(n) * camera_hz) // rate_hz
     first = np.searchsorted(held, np.arange(held[-1] + 1))
     return held, first

@@ -1,0 +1,67 @@
+"""The three stream builders from raw measurements: a bad sample anywhere ends the run with
+`nonfinite_measurement` at that sample, never a finite estimate reported as success."""
+
+import jax
+import numpy as np
+import pytest
+
+from visjax import RESULTS
+from visjax.estimators import (
+    SaveAt,
+    VelocityEstimator,
+    fixed_camera_stream,
+    moving_camera_stream,
+    platform_stream,
+    run,
+)
+from visjax.papers import chitrakaran, jang, nath
+
+
+def _assert_stops_at(estimator, stream, k, dt=None):
+    sol = run(estimator, stream, dt=dt, saveat=SaveAt(outputs=False), throw=False)
+    assert sol.result == RESULTS.nonfinite_measurement
+    assert int(sol.failed_sample) == k
+    assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(sol.final_state))
+    with pytest.raises(RuntimeError, match="measurement sample is not finite"):
+        run(estimator, stream, dt=dt, saveat=SaveAt(outputs=False))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_fixed_camera_stream(bad):
+    sc = chitrakaran.section6_scenario(0.1, 1000.0)
+    pixels = np.asarray(sc.pixels).copy()
+    pixels[37, 2, 1] = bad
+    stream, _, _ = fixed_camera_stream(
+        sc.ts, pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star, throw=False
+    )
+    est = VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63)
+    _assert_stops_at(est, stream, 37)
+    with pytest.raises(RuntimeError, match="not finite"):
+        fixed_camera_stream(
+            sc.ts, pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
+        )
+
+
+def test_moving_camera_stream_at_the_camera_rate():
+    sc = jang.scenario("II.1", 1.0)
+    pixels = np.asarray(sc.frame_pixels).copy()
+    velocities = np.asarray(sc.frame_velocities).copy()
+    pixels[12, 0] = np.nan
+    stream = moving_camera_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
+    _assert_stops_at(jang.observer("II.1"), stream, 12, dt=1e-3)
+    velocities[12, 5] = np.nan
+    pixels[12, 0] = 300.0
+    stream = moving_camera_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
+    _assert_stops_at(jang.observer("II.1"), stream, 12, dt=1e-3)
+
+
+def test_platform_stream():
+    sc = nath.scenario(0.05)
+    p_s = np.asarray(sc.p_s).copy()
+    p_s[23, 1, 0] = np.nan
+    stream = platform_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
+    _assert_stops_at(nath.initial_estimator(sc), stream, 23)
+    x_b = np.asarray(sc.x_b).copy()
+    x_b[31, 2] = np.inf
+    stream = platform_stream(sc.ts, sc.R_b, x_b, sc.p_s, sc.p_c, sc.omega_c)
+    _assert_stops_at(nath.initial_estimator(sc), stream, 31)
