@@ -11,6 +11,9 @@ from visjax.geometry import (
     camera_matrix,
     camera_matrix_lstsq,
     euclidean_reconstruction,
+    feature_in_camera,
+    intrinsic_matrix,
+    intrinsics_eq4,
     known_feature_regressors,
     pixel_to_normalized,
     project,
@@ -104,3 +107,10 @@ def test_shapes_that_were_accepted_silently(no_jaxtyping):
         camera_matrix(np.ones(5))
     with pytest.raises(ValueError, match=r"`x_b` must have shape \(3,\)"):
         known_feature_regressors(np.eye(3), np.ones(1), np.ones(3))
+    # these raised a raw TypeError, or a ValueError that named no argument
+    with pytest.raises(ValueError, match=r"`omega` must have shape \(3,\)"):
+        feature_in_camera(np.zeros(2), np.eye(3), np.zeros(3), np.eye(3), np.zeros(3))
+    with pytest.raises(ValueError, match=r"`fx` must have shape \(\)"):
+        intrinsic_matrix(np.zeros(2), 1.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match=r"`f` must have shape \(\)"):
+        intrinsics_eq4(np.zeros(2), 1.0, 1.0, 1.5, 1.0, 1.0)

@@ -33,6 +33,8 @@ def intrinsic_matrix(
     **Returns:** $A = [[f_x, s, c_x], [0, f_y, c_y], [0, 0, 1]]$.
     """
     fx, fy, cx, cy, skew = (as_float(v) for v in (fx, fy, cx, cy, skew))
+    for name, value in (("fx", fx), ("fy", fy), ("cx", cx), ("cy", cy), ("skew", skew)):
+        check_shape(value, (), name)
     dtype = jnp.result_type(fx, fy, cx, cy, skew)
     z = jnp.zeros((), dtype)
     o = jnp.ones((), dtype)

@@ -45,6 +45,8 @@ def intrinsics_eq4(
     """$A$ of seed 004 eq. (4): $[[f k_u, f k_u \\cot\\phi, u_0], [0, f k_v/\\sin\\phi, v_0],
     [0, 0, 1]]$, with $\\phi$ the angle between the camera axes ($\\pi/2$: no skew)."""
     f, k_u, k_v, phi, u0, v0 = (as_float(x) for x in (f, k_u, k_v, phi, u0, v0))
+    for name, value in (("f", f), ("k_u", k_u), ("k_v", k_v), ("phi", phi), ("u0", u0), ("v0", v0)):
+        check_shape(value, (), name)
     z, o = jnp.zeros_like(f), jnp.ones_like(f)
     return jnp.stack(
         [
@@ -78,6 +80,14 @@ def feature_in_camera(
 ) -> Float[Array, "3"]:
     """$\\bar m = R_c^T[R_b^T(\\omega - x_b) - x_c]$ of eq. (5)."""
     omega, R_b, x_b, R_c, x_c = (as_float(x) for x in (omega, R_b, x_b, R_c, x_c))
+    for name, value, shape in (
+        ("omega", omega, (3,)),
+        ("R_b", R_b, (3, 3)),
+        ("x_b", x_b, (3,)),
+        ("R_c", R_c, (3, 3)),
+        ("x_c", x_c, (3,)),
+    ):
+        check_shape(value, shape, name)
     return R_c.T @ (R_b.T @ (omega - x_b) - x_c)
 
 
