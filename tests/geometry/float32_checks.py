@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from visjax import RESULTS
 from visjax.geometry import (
     L_omega,
     camera_matrix_lstsq,
@@ -18,6 +19,7 @@ from visjax.geometry import (
     decompose_homography_known_normal,
     euclidean_reconstruction,
     find_homography,
+    find_homography_checked,
     pixel_to_normalized,
     project,
     so3_exp,
@@ -104,6 +106,12 @@ def main() -> dict:
         np.all(np.isfinite(jax.jacrev(so3_log)(jnp.eye(3, dtype=jnp.float32))))
     )
     out["dtypes"] += [str(Rs.dtype), str(back.dtype), str(jax.vmap(L_omega)(omegas).dtype)]
+    # pixels near 4e5 under a pure translation: version 1 reported g33 = 0 (the wrong cause)
+    rng = np.random.default_rng(4)
+    big = f32(4e5 + rng.uniform(-300, 300, (4, 2)))
+    _, r = find_homography_checked(big, big + f32([5.0, -3.0]))
+    out["large_pixels_successful"] = bool(r == RESULTS.successful)
+
     # camera least squares: an axis with no variation is detected in float32 too, and the
     # centred solve is accurate on offset, narrow data
     m = f32(np.random.default_rng(0).uniform(-0.3, 0.3, (50, 2)))

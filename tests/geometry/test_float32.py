@@ -39,3 +39,4 @@ def test_float32_accuracy(measured):
     # version 1 returned af = 0 for a flat axis, and a 0.14 relative error on narrow data
     assert measured["lstsq_flat_axis_detected"]
     assert measured["lstsq_narrow_rel"] < 1e-3
+    assert measured["large_pixels_successful"]

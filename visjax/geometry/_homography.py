@@ -128,7 +128,13 @@ def _dlt(p_ref, p_cur):
     bad = degenerate | nonfinite
     G = jnp.where(bad, jnp.eye(3, dtype=dtype), G)
     g33 = G[2, 2]
-    g33_zero = ~(jnp.abs(g33) > 100.0 * jnp.finfo(dtype).eps * jnp.linalg.norm(G))
+    # g33 = 0: the image origin maps to infinity. Compared with the other terms of the
+    # third row at the data's own scale (w_i = g31 u_i + g32 v_i + g33), not with |G|, whose
+    # translation entries grow with the pixel coordinates (version 1 called a pure
+    # translation of pixels near 4e5 "g33 = 0" in float32).
+    extent = jnp.max(jnp.abs(p_ref), axis=0)
+    row = jnp.abs(G[2, 0]) * extent[0] + jnp.abs(G[2, 1]) * extent[1] + jnp.abs(g33)
+    g33_zero = ~(jnp.abs(g33) > 100.0 * jnp.finfo(dtype).eps * row)
     g33_safe = jnp.where(g33_zero, 1.0, g33)
     G_n = (G / g33_safe).at[2, 2].set(1.0)  # exactly 1, not 1 - ulp
 
