@@ -279,9 +279,55 @@ def fuzz_decomposition(n, seed, dtype):
     return out
 
 
+def fuzz_so3_helpers(n, seed, dtype):
+    """`so3_exp` against Rodrigues' formula in NumPy (eq. (A.3)), and `L_omega` against its
+    inverse `L_omega_inv` (eq. (27)): no error path, NaN in gives NaN out."""
+    import jax
+    import numpy as np
+
+    from visjax.geometry import L_omega, L_omega_inv, so3_exp
+    from visjax.sim import rotation_from_vector
+
+    rng = np.random.default_rng(seed + 5)
+    exp_b = jax.jit(jax.vmap(so3_exp))
+    L_b = jax.jit(jax.vmap(lambda w: L_omega(w) @ L_omega_inv(w)))
+    tol = 1e-12 if dtype == "float64" else 1e-5
+    out = {}
+    for kind in KINDS:
+        u = rng.normal(size=(n, 3))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        if kind == "near_degenerate":  # near 0 and just below 2 pi (L_omega's pole)
+            tiny = 10.0 ** rng.uniform(-9, -3, n)
+            angle = np.where(rng.random(n) < 0.5, tiny, 2 * np.pi - 1e-2 - tiny)
+        else:
+            angle = rng.uniform(0, np.pi, n)
+        w = u * angle[:, None]
+        if kind == "invalid":
+            w[np.arange(n), rng.integers(0, 3, n)] = rng.choice([np.nan, np.inf, -np.inf], n)
+        wd = np.asarray(w, dtype)
+        R = np.asarray(exp_b(wd), float)
+        eye = np.asarray(L_b(wd), float)
+        c_exp, c_L = _counts(), _counts()
+        if kind == "invalid":
+            for c, o in ((c_exp, R), (c_L, eye)):
+                all_nan = np.all(np.isnan(o.reshape(n, -1)), 1)
+                c["result_code"] = int(np.sum(all_nan))  # NaN in, NaN out
+                c["silently_wrong"] = int(np.sum(~all_nan))
+        else:
+            ref = np.stack([rotation_from_vector(x) for x in np.asarray(wd, float)])
+            finite = np.all(np.isfinite(R.reshape(n, -1)), 1)
+            _classify(np.ones(n, bool), finite, np.max(np.abs(R - ref), (1, 2)), tol, c_exp)
+            finite = np.all(np.isfinite(eye.reshape(n, -1)), 1)
+            err = np.max(np.abs(eye - np.eye(3)), (1, 2))
+            _classify(np.ones(n, bool), finite, err, 1e3 * tol, c_L)
+        out.setdefault("so3_exp", {})[kind] = c_exp
+        out.setdefault("L_omega", {})[kind] = c_L
+    return out
+
+
 def fuzz(n: int, seed: int, dtype: str) -> dict:
     results = {}
-    for part in (fuzz_reconstruction, fuzz_camera, fuzz_so3, fuzz_decomposition):
+    for part in (fuzz_reconstruction, fuzz_camera, fuzz_so3, fuzz_decomposition, fuzz_so3_helpers):
         results.update(part(n, seed, dtype))
     totals = _counts()
     for per_kind in results.values():

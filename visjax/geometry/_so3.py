@@ -88,6 +88,8 @@ def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
 
     - `omega`: the rotation vector $\\theta u$ (radians).
 
+    No error path: a non-finite entry gives NaN (NaN in, NaN out).
+
     **Returns:** $R \\in SO(3)$.
     """
     omega = as_float(omega)
@@ -195,6 +197,8 @@ def L_omega(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
 
     - `e_omega`: the rotation vector $u\\theta$ of eq. (24).
 
+    No error path: a non-finite entry gives NaN (NaN in, NaN out).
+
     **Returns:** the 3x3 matrix $L_\\omega$.
     """
     e_omega = as_float(e_omega)
@@ -210,6 +214,7 @@ def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     Closed form (the left Jacobian of SO(3)):
     $L_\\omega^{-1} = I_3 + \\frac{1 - \\cos\\theta}{\\theta^2}[e_\\omega]_\\times
     + \\frac{\\theta - \\sin\\theta}{\\theta^3}[e_\\omega]_\\times^2$, with Taylor branches at 0.
+    No error path: a non-finite entry gives NaN (NaN in, NaN out).
     """
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
