@@ -135,3 +135,32 @@ def test_euclidean_command(tmp_path, capsys):
     assert len(summary["final_position_error_m"]) == 4
     assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 3 s in
     assert (tmp_path / "euclidean.png").stat().st_size > 20_000
+
+
+def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch):
+    """A folder without write permission. As root every folder is writable, so the
+    permission check is made to read the mode bits, as it would for any other user."""
+    import os
+    import stat
+
+    from visjax import cli
+
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    real_access = os.access
+
+    def access_as_a_user(path, mode):
+        if Path(path) == locked:
+            return bool(locked.stat().st_mode & stat.S_IWUSR) and real_access(path, mode)
+        return real_access(path, mode)
+
+    monkeypatch.setattr(cli.os, "access", access_as_a_user)
+    for out in (locked, locked / "new"):
+        with pytest.raises(SystemExit) as e:
+            main(["velocity", "--out", str(out)])
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("visjax: error:") and "is not writable" in err, err
+    assert list(locked.iterdir()) == []
+    locked.chmod(0o755)

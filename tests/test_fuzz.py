@@ -1,8 +1,10 @@
-"""The fuzz cases of `benchmarks/fuzz.py` on a few hundred inputs per function and kind,
-in float64 here and in float32 in a subprocess with x64 off: nothing silently non-finite,
-nothing silently wrong, every invalid input flagged."""
+"""The fuzz cases of `benchmarks/fuzz.py` in the test suite: every public geometry
+function and the three stream builders, well-posed, near-degenerate and invalid inputs;
+float64 here at batch sizes 1,000 and 1, float32 in a subprocess with x64 off. Nothing
+silently non-finite, nothing silently wrong, every invalid input flagged."""
 
 import importlib.util
+import inspect
 import json
 import os
 import pathlib
@@ -28,20 +30,35 @@ def _check(report):
             assert counts["silently_wrong"] == 0, (name, kind, counts)
             if kind == "well_posed":
                 assert counts["correct"] == sum(counts.values()), (name, counts)
-    for name in (
-        "euclidean_reconstruction",
-        "project_checked",
-        "so3_log",
-        "decompose_homography",
-        "decompose_homography_known_normal",
-        "so3_exp",
-        "L_omega",
-    ):
-        assert report["functions"][name]["invalid"]["correct"] == 0, name
+    # every public geometry function and the three stream builders are covered
+    import visjax.geometry
+
+    public = {n for n, f in vars(visjax.geometry).items() if inspect.isfunction(f) and n[0] != "_"}
+    covered = set(report["functions"]) | {
+        "find_homography",  # = find_homography_checked, raising
+        "project",  # = project_checked, raising
+        "L_omega_inv",  # fuzzed with L_omega
+    }
+    assert public <= covered, public - covered
+    for builder in ("fixed_camera_stream", "moving_camera_stream", "platform_stream"):
+        assert builder in report["functions"]
+    for name, per_kind in report["functions"].items():
+        # the invalid reconstruction inputs include bad intrinsics, which the homography
+        # from pixels alone rightly ignores
+        if name != "find_homography_checked":
+            assert per_kind["invalid"]["correct"] == 0, name
 
 
-def test_fuzz_float64():
-    _check(_load().fuzz(200, 7, "float64"))
+def test_fuzz_float64_batch_1000():
+    report = _load().fuzz(1000, 7, "float64")
+    assert report["batch"] == 1000
+    _check(report)
+
+
+def test_fuzz_float64_batch_1():
+    report = _load().fuzz(5, 8, "float64", batch=1)
+    assert report["batch"] == 1
+    _check(report)
 
 
 @pytest.mark.parametrize("seed", [11])

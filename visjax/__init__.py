@@ -2,7 +2,7 @@
 
 The library never changes JAX's global configuration. Enable float64 yourself
 (`jax.config.update("jax_enable_x64", True)`) for the papers' accuracy; the geometry also
-runs in float32.
+runs in float32. One exception, an XLA option set on import: see `_xla_workaround`.
 
 Subpackages, from the bottom layer up: `geometry` (camera, SO(3), homography,
 decomposition, calibration, the uncalibrated-camera model), `kinematics` (rigid-body motion,
@@ -14,6 +14,7 @@ studies), and the modules `report`, `plots` and `cli`.
 """
 
 from . import (
+    _xla_workaround,  # noqa: F401  (first: before any JAX backend starts)
     baselines as baselines,
     design as design,
     estimators as estimators,

@@ -1,10 +1,21 @@
 """Input checks shared by every package (run before tracing, on static shapes)."""
 
+import jax
 import jax.numpy as jnp
 
 
 def as_float(x):
-    """`x` as a JAX array of a floating dtype (integers promote to the default float)."""
+    """`x` as a JAX array of a floating dtype (integers promote to the default float).
+
+    A value that is not traced stays concrete, also inside `jit` (so that a stream built
+    inside `jit` from NumPy times still has concrete times for `run(..., dt=...)`)."""
+    if isinstance(x, jax.core.Tracer):
+        return _as_float(x)
+    with jax.ensure_compile_time_eval():
+        return _as_float(x)
+
+
+def _as_float(x):
     x = jnp.asarray(x)
     if not jnp.issubdtype(x.dtype, jnp.floating):
         x = x.astype(jnp.result_type(float))
@@ -38,3 +49,9 @@ def check_points(p, name: str, min_points: int = 4):
 def common_dtype(*xs):
     """The floating dtype the arguments promote to."""
     return jnp.result_type(*xs)
+
+
+def positive_finite(x):
+    """True (a traced bool) when every entry of `x` is finite and positive (NaN fails)."""
+    x = jnp.asarray(x)
+    return jnp.all(jnp.isfinite(x) & (x > 0))

@@ -130,3 +130,49 @@ def test_g33_zero_is_named_and_large_pixels_are_not():
     G, result = find_homography_checked(big, big + np.array([5.0, -3.0]))
     assert result == RESULTS.successful
     np.testing.assert_allclose(G[:2, 2], [5.0, -3.0], rtol=1e-6)
+
+
+def test_what_users_catch_outside_and_inside_jit():
+    """The README's contract: an `EquinoxRuntimeError` outside `jax.jit`; under it a
+    `JaxRuntimeError`, or a `ValueError` once the compiled function already ran without
+    error (JAX's fast path, jax-ml/jax#34083): `(RuntimeError, ValueError)` catches all,
+    and the message names the cause each time."""
+    import equinox as eqx
+
+    m = np.random.default_rng(0).uniform(-1, 1, (6, 2))
+    p = m * 500.0 + 300.0
+    bad = p.copy()
+    bad[2, 0] = np.nan
+    cause = "a coordinate is not finite"
+    with pytest.raises(eqx.EquinoxRuntimeError, match=cause):
+        camera_matrix_lstsq(m, bad)
+    first_bad = jax.jit(camera_matrix_lstsq)
+    with pytest.raises(jax.errors.JaxRuntimeError, match=cause):
+        first_bad(m, bad)
+    warm = jax.jit(camera_matrix_lstsq)
+    warm(m, p)
+    with pytest.raises((RuntimeError, ValueError), match=cause):
+        warm(m, bad)
+
+
+def test_no_xla_cpu_deadlock_with_several_batched_lapack_calls():
+    """Two batched inverses in one program hang XLA's CPU runtime (jaxlib 0.10) within a
+    few calls at batch 1,000 unless `import visjax` has set its scheduler option
+    (`visjax._xla_workaround`); here they must finish."""
+    import subprocess
+    import sys
+
+    code = (
+        "import visjax, jax, jax.numpy as jnp, numpy as np\n"
+        "f = jax.jit(lambda a, b: (jnp.linalg.inv(a), jnp.linalg.inv(b)))\n"
+        "a = np.random.rand(1000, 16, 16) + 16 * np.eye(16)\n"
+        "b = np.random.rand(1000, 4, 4, 4) + 4 * np.eye(4)\n"
+        "for _ in range(40): jax.block_until_ready(f(a, b))\n"
+        "import os; print(os.environ['XLA_FLAGS'])\n"
+    )
+    env = {k: v for k, v in __import__("os").environ.items() if k != "XLA_FLAGS"}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "concurrency_optimized_scheduler=false" in done.stdout

@@ -29,7 +29,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._util import as_float, check_shape
+from .._results import all_finite
+from .._util import as_float, check_shape, positive_finite
 from ..geometry import known_feature_regressors, to_homogeneous, unknown_feature_regressors
 from ._base import AbstractEstimator, Stream
 
@@ -107,12 +108,18 @@ def _ls_step_bound(rate, alpha, depth, amplification=1e3, steps=512):
     bound is the largest step, on a log grid from 1 us to 1 s, below `amplification`.
     """
     h = jnp.logspace(-6.0, 0.0, 241, dtype=jnp.result_type(rate))
-    k = jnp.arange(steps, dtype=h.dtype)
     g = 2.0 * h * rate * depth / alpha
-    r_k = rate / (1.0 + g[:, None] * k[None, :])
-    log_growth = jnp.sum(jnp.log(jnp.maximum(1.0, jnp.abs(1.0 - h[:, None] * r_k))), axis=1)
+
+    def r(k):
+        return rate / (1.0 + g * k)
+
+    def add(k, log_growth):  # a loop over k: memory O(len(h)), also under a large vmap
+        step = jnp.log(jnp.maximum(1.0, jnp.abs(1.0 - h * r(k.astype(h.dtype)))))
+        return log_growth + step
+
+    log_growth = jax.lax.fori_loop(0, steps, add, jnp.zeros_like(h))
     # still growing after `steps` steps: never settles
-    settles = h * r_k[:, -1] <= 2.0
+    settles = h * r(jnp.asarray(steps - 1, h.dtype)) <= 2.0
     ok = (log_growth <= jnp.log(amplification)) & settles
     return jnp.max(jnp.where(ok, h, 0.0))
 
@@ -177,15 +184,16 @@ class AdaptiveStructureEstimator(AbstractEstimator):
     `scale_min`: the scale entries $\\hat\\lambda_i$ of eq. (50) must stay above it in
     magnitude (default 1e-6).
 
-    Checks (under `jit` and `vmap`): every gain, `D` and the margins positive,
-    $\\eta_0 > \\eta_1 > 0$. Valid state: every predicted depth above half its projection
-    margin (the projection keeps it above the margin up to one Euler step), every scale
-    entry away from zero. Euler stability: near the estimate both laws are gradient flows,
-    $\\dot{\\tilde\\theta} \\approx -\\alpha\\Gamma W^T \\Lambda^{-1} W\\tilde\\theta$
-    ($\\Lambda$ the predicted depths), fastest at $\\Gamma_\\varphi = \\eta_0 I$ and
-    $\\Gamma = \\gamma_{s0} I$, and decaying as information accumulates: `max_stable_dt(y)`
-    is the largest step whose transient amplification stays below 1e3 (`_ls_step_bound`),
-    at the sample `y` and the initial estimates.
+    Checks (under `jit` and `vmap`): every gain, `D` and the margins positive and finite,
+    $\\eta_0 > \\eta_1 > 0$, the initial estimates finite. Valid state: every predicted
+    depth above half its projection margin (the projection keeps it above the margin up to
+    one Euler step), every scale entry away from zero. Euler stability: near the estimate
+    both laws are gradient flows, $\\dot{\\tilde\\theta} \\approx -\\alpha\\Gamma W^T
+    \\Lambda^{-1} W\\tilde\\theta$ ($\\Lambda$ the predicted depths), fastest at
+    $\\Gamma_\\varphi = \\eta_0 I$ and $\\Gamma = \\gamma_{s0} I$, and decaying as
+    information accumulates: `max_stable_dt(y)` is the largest step whose transient
+    amplification stays below 1e3 (`_ls_step_bound`), at the sample `y` and the initial
+    estimates.
     """
 
     alpha_c: Float[Array, ""] = eqx.field(converter=as_float)
@@ -216,19 +224,29 @@ class AdaptiveStructureEstimator(AbstractEstimator):
 
     def checks(self):
         return (
-            (self.alpha_c > 0, "`alpha_c` must be positive (eq. (38))."),
-            (self.alpha > 0, "`alpha` must be positive (eq. (42))."),
+            (positive_finite(self.alpha_c), "`alpha_c` must be positive (eq. (38))."),
+            (positive_finite(self.alpha), "`alpha` must be positive (eq. (42))."),
             (
-                (self.eta0 > self.eta1) & (self.eta1 > 0),
+                (self.eta0 > self.eta1) & positive_finite(self.eta1) & jnp.isfinite(self.eta0),
                 "need eta0 > eta1 > 0 (eq. (39)).",
             ),
-            (self.gamma_s0 > 0, "`gamma_s0` must be positive: Gamma(t0) > 0 (eq. (45))."),
-            (jnp.all(self.D > 0), "`D`, the scale of each camera parameter, must be positive."),
             (
-                (self.eps_c > 0) & (self.eps_s > 0),
+                positive_finite(self.gamma_s0),
+                "`gamma_s0` must be positive: Gamma(t0) > 0 (eq. (45)).",
+            ),
+            (positive_finite(self.D), "`D`, the scale of each camera parameter, must be positive."),
+            (
+                positive_finite(self.eps_c) & positive_finite(self.eps_s),
                 "the projection margins `eps_c`, `eps_s` must be positive.",
             ),
-            (self.scale_min >= 0, "`scale_min` must be non-negative."),
+            (
+                jnp.isfinite(self.scale_min) & (self.scale_min >= 0),
+                "`scale_min` must be non-negative.",
+            ),
+            (
+                all_finite((self.theta_c0, self.theta_s0)),
+                "the initial estimates `theta_c0`, `theta_s0` must be finite.",
+            ),
         )
 
     def init(self, y0: PlatformMeasurement) -> AdaptiveState:

@@ -268,12 +268,13 @@ def _n_steps(ts, dt) -> int:
     """The number of grid points t_0 + j dt up to the last sample (static)."""
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise ValueError(f"`dt` must be a positive finite number or None; got {dt!r}.")
-    ends = _concrete(jnp.stack([ts[0], ts[-1]]))
+    ends = _concrete(ts)
     if ends is None:
         raise ValueError(
             "with `dt`, the stream's times must be concrete (not traced) to fix the number "
             "of steps: build the stream outside `jit`, or close over its times."
         )
+    ends = ends[[0, -1]]
     span = float(ends[1] - ends[0])
     if not span > 0:
         raise ValueError(f"`stream.ts` must increase; got t_0 = {ends[0]}, t_N = {ends[1]}.")
@@ -289,7 +290,9 @@ def _precheck(estimator, y0, h_max, solver):
     if isinstance(solver, diffrax.Euler):
         bound = _concrete(estimator.max_stable_dt(y0))
         h = _concrete(h_max)
-        if bound is not None and h is not None and not h <= bound:
+        y0_finite = _concrete(all_finite(y0))
+        known = bound is not None and h is not None and y0_finite is not None and y0_finite
+        if known and not h <= bound:
             raise ValueError(
                 f"the integration step {float(h):.4g} s exceeds the Euler stability bound "
                 f"{float(bound):.4g} s of {type(estimator).__name__}'s gains: the run would "
@@ -425,8 +428,9 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
     r = RESULTS.successful
     r = RESULTS.where(~(all_finite(state) & estimator.valid(state, y0)), RESULTS.diverged, r)
     r = RESULTS.where(~all_finite(state), RESULTS.nonfinite_state, r)
-    r = RESULTS.where(~all_finite(y0), RESULTS.nonfinite_measurement, r)
     r = RESULTS.where(~stable, RESULTS.unstable_step, r)
+    # a bad first sample is named as such, not by the step bound computed from it
+    r = RESULTS.where(~all_finite(y0), RESULTS.nonfinite_measurement, r)
     r = RESULTS.where(~settings_ok, RESULTS.invalid_settings, r)
     failed = jnp.where(r == RESULTS.successful, -1, 0).astype(jnp.int32)
 

@@ -15,7 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from .._util import as_float, check_shape
+from .._results import all_finite
+from .._util import as_float, check_shape, positive_finite
 from ..geometry import pixel_to_normalized
 from ..kinematics import camera_term, known_input_term
 from ._base import AbstractEstimator, Stream
@@ -130,12 +131,13 @@ class UnknownInputObserver(AbstractEstimator):
     $\\bar f(x, u) = f(x, u) - A x$ (eq. (3.2)) and $E, M, N, L$ from `uio_matrices`.
     Measurements are `MovingCameraMeasurement`s (`moving_camera_stream`).
 
-    Checks (`checks`, under `jit` and `vmap`): $N$ Hurwitz (chapter 3), $x_{3,\\mathrm{guess}}
-    > 0$. Valid state: the depth estimate is positive, $\\hat x_3 > 0$ (the point is in front
-    of the camera, Assumption 2.1), and $\\|\\hat x\\|_\\infty$ below `bound`. Euler
-    stability: the error dynamics are $\\dot e = N e$ plus the Lipschitz term, so the step
-    must satisfy $h < \\min_\\lambda -2\\,\\mathrm{Re}\\lambda/|\\lambda|^2$ over the eigenvalues
-    of $N$ (`max_stable_dt`).
+    Checks (`checks`, under `jit` and `vmap`): $N$ Hurwitz (chapter 3),
+    $x_{3,\\mathrm{guess}} > 0$, the rank condition (3.20), every matrix and gain finite,
+    `bound` > 0. Valid state: the depth estimate is positive, $\\hat x_3 > 0$ (the point is
+    in front of the camera, Assumption 2.1), and $\\|\\hat x\\|_\\infty$ below `bound`.
+    Euler stability: the error dynamics are $\\dot e = N e$ plus the Lipschitz term, so the
+    step must satisfy $h < \\min_\\lambda -2\\,\\mathrm{Re}\\lambda/|\\lambda|^2$ over the
+    eigenvalues of $N$ (`max_stable_dt`).
 
     **Fields:** `A`, `C`, `D`, `K`, `Y` as in chapter 3 (`K`, `Y` are the gains; gradients
     flow through them); `x3_guess`: the initial guess of $1/Z$ (the observer starts at
@@ -190,7 +192,15 @@ class UnknownInputObserver(AbstractEstimator):
         lam = self._N_eigenvalues()
         return (
             (jnp.max(jnp.real(lam)) < 0, "`N` = M A - K C must be Hurwitz (chapter 3)."),
-            (self.x3_guess > 0, "`x3_guess` (the initial 1/Z) must be positive."),
+            (
+                positive_finite(self.x3_guess),
+                "`x3_guess` (the initial 1/Z) must be positive and finite.",
+            ),
+            (
+                all_finite((self.A, self.C, self.D, self.K, self.Y)),
+                "`A`, `C`, `D` and the gains `K`, `Y` must be finite.",
+            ),
+            (self.bound > 0, "`bound` must be positive."),
             (
                 self._rank_condition(),
                 "(A, C, D) must satisfy the rank condition (3.20) and rank(CD) = rank(D).",

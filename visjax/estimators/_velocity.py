@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, raise_or_keep
-from .._util import as_float, check_points, check_shape
+from .._util import as_float, check_points, check_shape, positive_finite
 from ..geometry import (
     L_omega,
     L_omega_inv,
@@ -358,8 +358,8 @@ class VelocityEstimator(AbstractEstimator):
 
     def checks(self):
         return (
-            (jnp.all(self.K > 0), "`K` must be positive definite (eq. (40))."),
-            (jnp.all(self.rho > 0), "`rho` must be positive definite (eq. (40))."),
+            (positive_finite(self.K), "`K` must be positive definite and finite (eq. (40))."),
+            (positive_finite(self.rho), "`rho` must be positive definite and finite (eq. (40))."),
             (self.bound > 0, "`bound` must be positive."),
         )
 

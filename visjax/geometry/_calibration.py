@@ -57,7 +57,11 @@ def camera_matrix_lstsq(
 
 
 def camera_matrix(theta: Float[ArrayLike, "4"]) -> Float[Array, "3 3"]:
-    """$K_c$ from $\\theta = [f, af, c_x, c_y]$ (seed 003, section 2.2)."""
+    """$K_c$ from $\\theta = [f, af, c_x, c_y]$ (seed 003, section 2.2).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
+    """
     theta = as_float(theta)
     check_shape(theta, (4,), "theta")
     f, af, cx, cy = theta[0], theta[1], theta[2], theta[3]

@@ -31,6 +31,9 @@ def intrinsic_matrix(
     - `skew`: the skew entry $A_{12}$ (0 for rectangular pixels).
 
     **Returns:** $A = [[f_x, s, c_x], [0, f_y, c_y], [0, 0, 1]]$.
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
     """
     fx, fy, cx, cy, skew = (as_float(v) for v in (fx, fy, cx, cy, skew))
     for name, value in (("fx", fx), ("fy", fy), ("cx", cx), ("cy", cy), ("skew", skew)):
@@ -57,7 +60,11 @@ def _check_last(x, size: int, name: str):
 
 
 def to_homogeneous(x: Float[ArrayLike, "... 2"]) -> Float[Array, "... 3"]:
-    """Append a 1 to the last axis: $[u, v] \\mapsto [u, v, 1]$ (eq. (14))."""
+    """Append a 1 to the last axis: $[u, v] \\mapsto [u, v, 1]$ (eq. (14)).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
+    """
     x = _check_last(x, 2, "x")
     return jnp.concatenate([x, jnp.ones(x.shape[:-1] + (1,), x.dtype)], axis=-1)
 
@@ -99,6 +106,9 @@ def normalized_to_pixel(
     - `A`: the intrinsic matrix.
 
     **Returns:** pixel coordinates $[u, v]$, shape (..., 2).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
     """
     m = _check_last(m, 2, "m")
     A = _check_A(A)
@@ -156,6 +166,9 @@ def extended_intrinsics(A: Float[ArrayLike, "3 3"]) -> Float[Array, "3 3"]:
     $A_e = A - [[0, 0, u_0], [0, 0, v_0], [0, 0, 0]]$, which maps the rate of the
     normalized coordinates to the rate of the extended image coordinates
     $p_e = [u, v, \\ln z]$ in eq. (21).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
     """
     A = _check_A(A)
     mask = jnp.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]], A.dtype)

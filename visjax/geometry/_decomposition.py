@@ -243,7 +243,9 @@ def select_solution(
     - `m_ref`: normalized reference points $[x, y, 1]$, shape (k, 3).
     - `n_prior`: a prior plane normal (need not be unit).
 
-    **Returns:** `(R, t, n, ok)`, with `ok` false if no solution passes the visibility test.
+    **Returns:** `(R, t, n, ok)`, with `ok` false if no solution passes the visibility test
+    or if the inputs are not finite (a NaN anywhere: never `ok` with NaN or with a choice a
+    NaN decided).
     """
     R, t, n, m_ref, n_prior = (as_float(x) for x in (R, t, n, m_ref, n_prior))
     check_shape(R, (4, 3, 3), "R")
@@ -254,4 +256,8 @@ def select_solution(
     visible = jnp.all(m_ref @ n.T > 0.0, axis=0)
     score = jnp.where(visible, n @ n_prior, -jnp.inf)
     k = jnp.argmax(score)
-    return R[k], t[k], n[k], jnp.any(visible)
+    # explicit: a NaN in `n` fails the visibility test, but one in R, t, m_ref or the prior
+    # could still pick a solution; and no reduction may be trusted to keep a NaN
+    finite = jnp.all(jnp.isfinite(R)) & jnp.all(jnp.isfinite(t)) & jnp.all(jnp.isfinite(n))
+    finite = finite & jnp.all(jnp.isfinite(m_ref)) & jnp.all(jnp.isfinite(n_prior))
+    return R[k], t[k], n[k], jnp.any(visible) & finite

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Float
 
-from .._results import RESULTS, raise_or_keep
+from .._results import RESULTS, intrinsics_ok, raise_or_keep
 from .._util import as_float, check_points, check_shape
 from ._camera import to_homogeneous
 
@@ -212,7 +212,9 @@ def alpha_g33(G_n: Float[ArrayLike, "3 3"], p_ref: Float[ArrayLike, "n 2"]) -> F
     - `p_ref`: reference pixels $p_i^*$, shape (n, 2).
 
     **Returns:** $\\alpha_i g_{33}$ for each point, shape (n,). A point whose image lies at
-    infinity gets `inf`; `euclidean_reconstruction` reports it as behind the camera.
+    infinity gets `inf`; `euclidean_reconstruction` reports it as behind the camera. No
+    error path: NaN in `G_n` or in a pixel gives NaN for the points it reaches (NaN in,
+    NaN out).
     """
     G_n = as_float(G_n)
     check_shape(G_n, (3, 3), "G_n")
@@ -228,20 +230,32 @@ def euclidean_homography(
 
     Convention: the scale of `G` carries over: with $G_n = G/g_{33}$ this returns
     $H / g_{33}$.
+
+    No error path: an unusable `A` (non-finite, or a zero focal length) gives an all-NaN
+    `H`, and a NaN or inf entry of `G` gives NaN or inf in the entries it reaches (NaN in,
+    NaN out), never a finite value.
     """
     G = as_float(G)
     A = as_float(A)
     check_shape(G, (3, 3), "G")
     check_shape(A, (3, 3), "A")
-    return jnp.linalg.solve(A, G @ A)
+    ok = intrinsics_ok(A)
+    A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))  # no inf, no NaN gradient
+    return jnp.where(ok, jnp.linalg.solve(A, G @ A), jnp.nan)
 
 
 def projective_homography(
     H: Float[ArrayLike, "3 3"], A: Float[ArrayLike, "3 3"]
 ) -> Float[Array, "3 3"]:
-    """The projective homography $G = A H A^{-1}$ of eq. (16)."""
+    """The projective homography $G = A H A^{-1}$ of eq. (16).
+
+    No error path, as `euclidean_homography`: an unusable `A` gives an all-NaN `G`; NaN in
+    `H` gives NaN out.
+    """
     H = as_float(H)
     A = as_float(A)
     check_shape(H, (3, 3), "H")
     check_shape(A, (3, 3), "A")
-    return A @ jnp.linalg.solve(A.T, H.T).T
+    ok = intrinsics_ok(A)
+    A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))
+    return jnp.where(ok, A @ jnp.linalg.solve(A.T, H.T).T, jnp.nan)

@@ -31,6 +31,9 @@ def skew(v: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     - `v`: a 3-vector.
 
     **Returns:** the 3x3 matrix $[v]_\\times$ (seed 000, notation of eq. (27)).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
     """
     v = as_float(v)
     check_shape(v, (3,), "v")
@@ -45,7 +48,11 @@ def skew(v: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
 
 
 def vee(S: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
-    """The inverse of `skew`: the vector of the skew-symmetric part of `S`."""
+    """The inverse of `skew`: the vector of the skew-symmetric part of `S`.
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
+    """
     S = as_float(S)
     check_shape(S, (3, 3), "S")
     return 0.5 * jnp.stack([S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1]])
@@ -56,6 +63,9 @@ def sinc(x: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
 
     Convention: unnormalised (unlike `numpy.sinc`, which is $\\sin(\\pi x)/(\\pi x)$);
     $\\mathrm{sinc}(0) = 1$ with a finite gradient there.
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
     """
     x = as_float(x)
     x2 = x * x

@@ -43,7 +43,11 @@ def intrinsics_eq4(
     v0: float | ArrayLike,
 ) -> Float[Array, "3 3"]:
     """$A$ of seed 004 eq. (4): $[[f k_u, f k_u \\cot\\phi, u_0], [0, f k_v/\\sin\\phi, v_0],
-    [0, 0, 1]]$, with $\\phi$ the angle between the camera axes ($\\pi/2$: no skew)."""
+    [0, 0, 1]]$, with $\\phi$ the angle between the camera axes ($\\pi/2$: no skew).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
+    """
     f, k_u, k_v, phi, u0, v0 = (as_float(x) for x in (f, k_u, k_v, phi, u0, v0))
     for name, value in (("f", f), ("k_u", k_u), ("k_v", k_v), ("phi", phi), ("u0", u0), ("v0", v0)):
         check_shape(value, (), name)
@@ -60,7 +64,11 @@ def intrinsics_eq4(
 def camera_parameters(
     A: Float[ArrayLike, "3 3"], R_c: Float[ArrayLike, "3 3"], x_c: Float[ArrayLike, "3"]
 ) -> tuple[Float[Array, "12"], Float[Array, "4"]]:
-    """$(\\theta_{c1}, \\theta_{c2})$ of section III from $A$, $R_c$, $x_c$ (module docstring)."""
+    """$(\\theta_{c1}, \\theta_{c2})$ of section III from $A$, $R_c$, $x_c$ (module docstring).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
+    """
     A, R_c, x_c = as_float(A), as_float(R_c), as_float(x_c)
     check_shape(A, (3, 3), "A")
     check_shape(R_c, (3, 3), "R_c")
@@ -78,7 +86,11 @@ def feature_in_camera(
     R_c: Float[ArrayLike, "3 3"],
     x_c: Float[ArrayLike, "3"],
 ) -> Float[Array, "3"]:
-    """$\\bar m = R_c^T[R_b^T(\\omega - x_b) - x_c]$ of eq. (5)."""
+    """$\\bar m = R_c^T[R_b^T(\\omega - x_b) - x_c]$ of eq. (5).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
+    """
     omega, R_b, x_b, R_c, x_c = (as_float(x) for x in (omega, R_b, x_b, R_c, x_c))
     for name, value, shape in (
         ("omega", omega, (3,)),
@@ -101,6 +113,9 @@ def unknown_feature_regressors(
 
     Built from the measured platform pose and camera parameters (true, or estimated: then
     they are $\\hat W$, $\\hat\\Pi$ of eq. (15)).
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
     """
     R_b, x_b, theta_c1, theta_c2 = (as_float(x) for x in (R_b, x_b, theta_c1, theta_c2))
     check_shape(R_b, (3, 3), "R_b")
@@ -123,6 +138,9 @@ def known_feature_regressors(
 
     With $q_j = R_b^T(\\omega_{cj} - x_b)$: $W_{xj} = [I_3 \\otimes q_j^T, I_3]$,
     $\\Pi_{xj} = [q_j^T, 1]$. Measured signals only.
+
+    No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
+    computed from it; none is turned finite).
     """
     R_b, x_b, omega_c = as_float(R_b), as_float(x_b), as_float(omega_c)
     check_shape(R_b, (3, 3), "R_b")
