@@ -39,6 +39,7 @@ from ._velocity import (
     VelocityMeasurement as VelocityMeasurement,
     VelocityOutput as VelocityOutput,
     VelocityState as VelocityState,
+    depth_from_feature_length as depth_from_feature_length,
     depth_from_known_length as depth_from_known_length,
     diagonal_intersection as diagonal_intersection,
     error_signal as error_signal,

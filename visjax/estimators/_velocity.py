@@ -236,6 +236,67 @@ def depth_from_known_length(
     return eqx.error_if(z1, ~(z1 > 0.0), "depth recovery gave z1* <= 0: check s1, R*, n*.")
 
 
+def depth_from_feature_length(
+    p_ref: Float[ArrayLike, "n 2"],
+    A: Float[ArrayLike, "3 3"],
+    n_star: Float[ArrayLike, "3"],
+    known_length: tuple,
+) -> Float[Array, ""]:
+    """The reference depth $z_1^*$ of feature 1 from one known length between two features.
+
+    The paper's premise (section 5, before eq. (56)): "a single geometric length between two
+    feature points on the object be known". With the plane normal $n^*$ known and every
+    feature on the plane at distance $d^*$ (eq. (4): $n^{*T}\\bar m_i^* = d^*$), feature
+    $i$ is at $\\bar m_i^* = d^*\\, m_i^* / (n^{*T} m_i^*)$ in the reference camera frame, so
+    the known distance $L = \\|\\bar m_i^* - \\bar m_j^*\\|$ gives
+
+    $d^* = L / \\| m_i^*/(n^{*T} m_i^*) - m_j^*/(n^{*T} m_j^*) \\|$ and
+    $z_1^* = d^* / (n^{*T} m_1^*)$ (the third entry of $\\bar m_1^*$, eq. (58)).
+
+    Exact for any coplanar feature set (no parallelogram, no object origin needed).
+
+    **Arguments:**
+
+    - `p_ref`: the reference pixels of the features, feature 1 first, shape (n, 2).
+    - `A`: the intrinsic matrix; `n_star`: the plane normal in the reference camera frame
+        (`plane_normal_from_frames`, or known).
+    - `known_length`: `(i, j, L)`: two feature indices (Python ints, 0 is feature 1) and
+        their distance in metres (an array: gradients flow through it).
+
+    **Returns:** $z_1^*$ (the sign of `n_star` does not matter: it is taken with
+    $n^{*T} m_1^* > 0$, eq. (4)); a runtime error if the two features coincide in the
+    image, or if the depth is not positive (a feature on the other side of the camera, or
+    $L \le 0$).
+    """
+    p_ref = check_points(p_ref, "p_ref", min_points=2)
+    A, n_star = as_float(A), as_float(n_star)
+    check_shape(n_star, (3,), "n_star")
+    try:
+        i, j, length = known_length
+    except (TypeError, ValueError):
+        raise ValueError(f"`known_length` must be (i, j, L); got {known_length!r}.") from None
+    n = p_ref.shape[0]
+    if not all(isinstance(k, int) and 0 <= k < n for k in (i, j)) or i == j:
+        raise ValueError(
+            f"`known_length` must name two different features among the {n}; got ({i}, {j})."
+        )
+    length = as_float(length)
+    check_shape(length, (), "known_length[2]")
+    m = to_homogeneous(pixel_to_normalized(p_ref, A))
+    u = n_star / jnp.linalg.norm(n_star)
+    u = jnp.where(u @ m[0] < 0.0, -u, u)  # the sign of eq. (4): d* = n*^T m_bar* > 0
+    scaled = m / (m @ u)[:, None]  # m_k / (n^T m_k): the features at d* = 1
+    gap = jnp.linalg.norm(scaled[i] - scaled[j])
+    gap = eqx.error_if(
+        gap,
+        ~(gap > 0.0),
+        "depth_from_feature_length: the two features of the known length coincide.",
+    )
+    d_star = length / gap
+    z1 = d_star / (u @ m[0])
+    return eqx.error_if(z1, ~(z1 > 0.0), "depth_from_feature_length: z1* <= 0 (check n*, L > 0).")
+
+
 def paper_eq56_matrix(m1_star, m1, alpha1, n_star, x_h, R_bar) -> Float[Array, "3 3"]:
     """The matrix $\\mathrm{diag}(\\bar\\gamma_1 - \\bar\\gamma_2) + \\bar R$ that eq. (56) inverts.
 
@@ -406,13 +467,20 @@ def fixed_camera_stream(
     n_star: Float[ArrayLike, "3"] | None = None,
     z1_star: Float[ArrayLike, ""] | None = None,
     n_prior: Float[ArrayLike, "3"] | None = None,
+    known_length: tuple | None = None,
+    reference_pixels: Float[ArrayLike, "n 2"] | None = None,
     truth=None,
     throw: bool = True,
 ):
     """The measurement `Stream` of the velocity estimator from raw pixel frames.
 
-    Frame 0 is the reference image. Unknown constants are measured first, once: the plane
-    normal by `plane_normal_from_frames` (unless `n_star` is given), then $z_1^*$ by
+    The reference image (the pose $R^*$ describes) is frame 0, or `reference_pixels` when
+    given (an image taken before the run, or any other frame: the run then starts at the
+    first frame of `pixels`, with $\\hat e(t_0) = e(t_0)$, not at the reference).
+    Unknown constants are measured first, once: the plane normal by
+    `plane_normal_from_frames` (unless `n_star` is given), then $z_1^*$ (unless `z1_star`
+    is given): by `depth_from_feature_length` when `known_length = (i, j, L)`
+    names two features and their distance (the paper's premise; any coplanar set), else by
     `depth_from_known_length` with the origin's pixel (default: `diagonal_intersection` of
     the four reference features). Then $e$, $J$, $J^{-1}$ of every frame, vmapped.
 
@@ -430,9 +498,19 @@ def fixed_camera_stream(
         raise ValueError(
             f"`ts` must have one time per frame, shape ({pixels.shape[0]},); got {ts.shape}."
         )
-    p_ref = pixels[0]
+    if reference_pixels is None:
+        p_ref = pixels[0]
+    else:
+        p_ref = check_points(reference_pixels, "reference_pixels")
+        if p_ref.shape != pixels.shape[1:]:
+            raise ValueError(
+                f"`reference_pixels` must have the frames' shape {tuple(pixels.shape[1:])};"
+                f" got {tuple(p_ref.shape)}."
+            )
     if n_star is None:
         n_star = plane_normal_from_frames(p_ref, pixels, A, n_prior)
+    if z1_star is None and known_length is not None:
+        z1_star = depth_from_feature_length(p_ref, A, n_star, known_length)
     if z1_star is None:
         if origin_pixel is None:
             origin_pixel = diagonal_intersection(p_ref)

@@ -1,0 +1,106 @@
+"""Depth from one known length (Chitrakaran et al., the premise before eq. (56)): exact on
+random irregular coplanar feature sets, whatever the object origin; under jit, vmap, grad."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from visjax.estimators import depth_from_feature_length, fixed_camera_stream
+from visjax.geometry import intrinsic_matrix, project
+from visjax.papers import chitrakaran
+
+
+def _scene(rng, n=5):
+    """A random plane in front of a random camera, `n` irregular points on it."""
+    normal = np.array([*rng.uniform(-0.5, 0.5, 2), 1.0])  # facing the camera, tilted
+    normal /= np.linalg.norm(normal)
+    d = rng.uniform(0.5, 5.0)
+    a, b = np.linalg.svd(normal[None])[2][1:]  # two directions in the plane
+    uv = rng.uniform(-0.3, 0.3, (n, 2)) * d
+    points = d * normal + uv[:, :1] * a + uv[:, 1:] * b  # n . X = d for all
+    A = np.asarray(
+        intrinsic_matrix(*rng.uniform([400, 400, 200, 150, -5], [1500, 1500, 500, 400, 5]))
+    )
+    return points, A, normal
+
+
+def test_exact_on_random_irregular_coplanar_sets():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        points, A, normal = _scene(rng)
+        assert np.all(points[:, 2] > 0)
+        p = np.asarray(project(points, A))
+        i, j = rng.choice(5, 2, replace=False)
+        L = np.linalg.norm(points[i] - points[j])
+        z1 = depth_from_feature_length(p, A, normal, (int(i), int(j), L))
+        np.testing.assert_allclose(z1, points[0, 2], rtol=1e-9)
+        # the sign of the normal does not matter
+        np.testing.assert_allclose(
+            depth_from_feature_length(p, A, -normal, (int(i), int(j), L)), points[0, 2], rtol=1e-9
+        )
+
+
+def test_jit_vmap_grad():
+    rng = np.random.default_rng(4)
+    scenes = [_scene(rng) for _ in range(8)]
+    P = np.stack([np.asarray(project(s[0], s[1])) for s in scenes])
+    A = np.stack([s[1] for s in scenes])
+    N = np.stack([s[2] for s in scenes])
+    L = np.array([np.linalg.norm(s[0][1] - s[0][3]) for s in scenes])
+    f = jax.jit(jax.vmap(lambda p, a, n, l: depth_from_feature_length(p, a, n, (1, 3, l))))
+    np.testing.assert_allclose(f(P, A, N, L), [s[0][0, 2] for s in scenes], rtol=1e-9)
+    # z1* is linear in L: dz1*/dL = z1*/L exactly
+    g = jax.grad(lambda l: depth_from_feature_length(P[0], A[0], N[0], (1, 3, l)))(L[0])
+    np.testing.assert_allclose(g, scenes[0][0][0, 2] / L[0], rtol=1e-9)
+
+
+def test_bad_known_length(no_jaxtyping):
+    rng = np.random.default_rng(5)
+    points, A, normal = _scene(rng)
+    p = np.array(project(points, A))
+    with pytest.raises(ValueError, match="two different features"):
+        depth_from_feature_length(p, A, normal, (2, 2, 1.0))
+    with pytest.raises(ValueError, match="two different features"):
+        depth_from_feature_length(p, A, normal, (0, 7, 1.0))
+    with pytest.raises(ValueError, match=r"\(i, j, L\)"):
+        depth_from_feature_length(p, A, normal, 0.3)
+    p[3] = p[1]
+    with pytest.raises(RuntimeError, match="coincide"):
+        depth_from_feature_length(p, A, normal, (1, 3, 0.2))
+    with pytest.raises(RuntimeError, match="z1"):
+        depth_from_feature_length(p, A, normal, (0, 1, -0.2))
+
+
+def test_the_stream_uses_the_known_length():
+    """On the section-6 scenario, a length between two features (not through the object
+    origin) gives the true z1* and the same stream as the true constants."""
+    sc = chitrakaran.section6_scenario(0.05, 1000.0)
+    s = np.asarray(sc.s)
+    L = float(np.linalg.norm(s[1] - s[2]))
+    stream, n_star, z1 = fixed_camera_stream(
+        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, known_length=(1, 2, L)
+    )
+    np.testing.assert_allclose(z1, sc.z1_star, rtol=1e-9)
+    ref, _, _ = fixed_camera_stream(
+        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
+    )
+    np.testing.assert_allclose(stream.ys.J, ref.ys.J, rtol=1e-8, atol=1e-10)
+    assert jnp.shape(z1) == ()
+
+
+def test_any_reference_image(no_jaxtyping):
+    """The reference image given apart from the frames: the run can start anywhere, and
+    the measurements are those of the full stream from there on (no spike at the start)."""
+    sc = chitrakaran.section6_scenario(0.2, 1000.0)
+    kw = dict(n_star=sc.n_star, z1_star=sc.z1_star)
+    full, _, _ = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], **kw)
+    late, _, _ = fixed_camera_stream(
+        sc.ts[120:], sc.pixels[120:], sc.A, sc.R_star, sc.s[0], reference_pixels=sc.pixels[0], **kw
+    )
+    np.testing.assert_allclose(late.ys.e, full.ys.e[120:], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(late.ys.J_inv, full.ys.J_inv[120:], rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="reference_pixels"):
+        fixed_camera_stream(
+            sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], reference_pixels=sc.pixels[0, :3], **kw
+        )
