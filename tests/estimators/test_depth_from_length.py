@@ -104,3 +104,34 @@ def test_any_reference_image(no_jaxtyping):
         fixed_camera_stream(
             sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], reference_pixels=sc.pixels[0, :3], **kw
         )
+
+
+def test_velocity_in_the_object_frame():
+    """Remark 6: `v_object` is the estimate expressed in the object frame, R^T v with the
+    true orientation R (noise-free, R = R_bar R* to 1e-9), and tracks R^T v_true."""
+    from visjax.estimators import SaveAt, VelocityEstimator, run
+
+    sc = chitrakaran.section6_scenario(0.3, 1000.0)
+    stream, _, _ = fixed_camera_stream(
+        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
+    )
+    np.testing.assert_allclose(stream.ys.R, sc.R, atol=1e-9)
+    sol = run(
+        VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63),
+        stream,
+        saveat=SaveAt(outputs=True),
+    )
+    R = np.asarray(sc.R)
+    v, v_obj = np.asarray(sol.outputs.v_hat), np.asarray(sol.outputs.v_object)
+    expected = np.concatenate(
+        [np.einsum("nji,nj->ni", R, v[:, :3]), np.einsum("nji,nj->ni", R, v[:, 3:])], 1
+    )
+    np.testing.assert_allclose(v_obj, expected, atol=1e-9)
+    # and against the truth, as v_hat is against its truth
+    true = np.asarray(sc.velocity)
+    true_obj = np.concatenate(
+        [np.einsum("nji,nj->ni", R, true[:, :3]), np.einsum("nji,nj->ni", R, true[:, 3:])], 1
+    )
+    err_cam = np.max(np.abs(v - true)[150:])
+    err_obj = np.max(np.abs(v_obj - true_obj)[150:])
+    np.testing.assert_allclose(err_obj, err_cam, rtol=0.5)

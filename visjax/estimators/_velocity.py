@@ -41,13 +41,16 @@ class VelocityMeasurement(eqx.Module):
     """One sample of what the velocity estimator reads.
 
     **Fields:** `e` (6,): $e = [e_v, e_\\omega]$; `J` (6, 6): eq. (33); `J_inv` (6, 6): its
-    inverse, in closed form from the block structure; `result`: why the frame could not
-    be measured (then `e`, `J`, `J_inv` are NaN, never a finite placeholder).
+    inverse, in closed form from the block structure; `R` (3, 3): the object's orientation
+    $R = \\bar R R^*$ in the camera frame (eq. (8)), for velocities in the object frame
+    (Remark 6); `result`: why the frame could not be measured (then `e`, `J`, `J_inv`, `R`
+    are NaN, never a finite placeholder).
     """
 
     e: Float[Array, "*batch 6"]
     J: Float[Array, "*batch 6 6"]
     J_inv: Float[Array, "*batch 6 6"]
+    R: Float[Array, "*batch 3 3"]
     result: RESULTS
 
 
@@ -153,7 +156,8 @@ def velocity_measurements(
     R_bar = jnp.where(rec.result == RESULTS.successful, rec.R_bar, jnp.eye(3, dtype=A.dtype))
     e = error_signal(p_cur[0], p_ref[0], rec.alpha[0], R_bar)
     m1 = pixel_to_normalized(p_cur[0], A)
-    J, J_inv = kinematics_jacobian(A, m1, rec.alpha[0], z1_star, R_bar @ R_star, s1, e[3:])
+    R = R_bar @ R_star  # eq. (8)
+    J, J_inv = kinematics_jacobian(A, m1, rec.alpha[0], z1_star, R, s1, e[3:])
     ok = jnp.all(jnp.isfinite(J_inv)) & jnp.all(jnp.isfinite(J))
     result = RESULTS.where(
         rec.result != RESULTS.successful,
@@ -161,8 +165,8 @@ def velocity_measurements(
         RESULTS.where(ok, RESULTS.successful, RESULTS.singular_jacobian),
     )
     bad = result != RESULTS.successful
-    e, J, J_inv = (jnp.where(bad, jnp.nan, x) for x in (e, J, J_inv))
-    out = VelocityMeasurement(e=e, J=J, J_inv=J_inv, result=result)
+    e, J, J_inv, R = (jnp.where(bad, jnp.nan, x) for x in (e, J, J_inv, R))
+    out = VelocityMeasurement(e=e, J=J, J_inv=J_inv, R=R, result=result)
     return raise_or_keep(result, out, throw)
 
 
@@ -364,10 +368,13 @@ class VelocityState(eqx.Module):
 
 @final
 class VelocityOutput(eqx.Module):
-    """The estimated velocity $\\hat v = J^{-1}\\hat\\kappa$ (Theorem 2): $[\\hat v_e,
-    \\hat\\omega_e]$ in the camera frame."""
+    """The estimated velocity $\\hat v = J^{-1}\\hat\\kappa$ (Theorem 2): `v_hat` $=
+    [\\hat v_e, \\hat\\omega_e]$ expressed in the camera frame $\\mathcal I$, and `v_object`
+    the same velocity expressed in the object frame $\\mathcal F$, $[R^T\\hat v_e,
+    R^T\\hat\\omega_e]$ with $R = \\bar R R^*$ (Remark 6)."""
 
     v_hat: Float[Array, "6"]
+    v_object: Float[Array, "6"]
 
 
 @final
@@ -445,7 +452,10 @@ class VelocityEstimator(AbstractEstimator):
 
     def output(self, t, state: VelocityState, y: VelocityMeasurement) -> VelocityOutput:
         kappa, _ = self._kappa(state, y)
-        return VelocityOutput(v_hat=y.J_inv @ kappa)  # Theorem 2: v_hat = J^{-1} kappa_hat
+        v_hat = y.J_inv @ kappa  # Theorem 2: v_hat = J^{-1} kappa_hat
+        # Remark 6: the same velocity in the object frame, with R = R_bar R* (eq. (8))
+        v_object = jnp.concatenate([y.R.T @ v_hat[:3], y.R.T @ v_hat[3:]])
+        return VelocityOutput(v_hat=v_hat, v_object=v_object)
 
     def diagnostics(self, t, state: VelocityState, y: VelocityMeasurement):
         kappa, e_tilde = self._kappa(state, y)
