@@ -65,3 +65,30 @@ def test_platform_stream():
     x_b[31, 2] = np.inf
     stream = platform_stream(sc.ts, sc.R_b, x_b, sc.p_s, sc.p_c, sc.omega_c)
     _assert_stops_at(nath.initial_estimator(sc), stream, 31)
+
+
+def test_a_stream_built_inside_jit_keeps_its_times_for_dt():
+    """`run(..., dt=...)` needs concrete times; a stream built inside `jit(vmap)` from NumPy
+    times keeps them concrete (version 1 refused it), and matches the one built outside."""
+    sc = jang.scenario("II.1", 1.0)
+    frame_ts = np.asarray(sc.frame_ts)
+    pixels = np.asarray(sc.frame_pixels)
+    observer = jang.observer("II.1")
+
+    def final_depth(noise):
+        stream = moving_camera_stream(frame_ts, pixels + noise, sc.frame_velocities, sc.Kc_observer)
+        sol = run(observer, stream, dt=1e-3, saveat=SaveAt(outputs=False), throw=False)
+        return sol.final_state.z[2], sol.result._value
+
+    noise = np.zeros((2,) + pixels.shape)
+    noise[1] = 0.1
+    z, codes = jax.jit(jax.vmap(final_depth))(noise)
+    assert np.all(codes == RESULTS.successful._value)
+    outside = run(
+        observer,
+        moving_camera_stream(frame_ts, pixels, sc.frame_velocities, sc.Kc_observer),
+        dt=1e-3,
+        saveat=SaveAt(outputs=False),
+    )
+    np.testing.assert_allclose(z[0], outside.final_state.z[2], rtol=1e-12)
+    assert z[1] != z[0]
