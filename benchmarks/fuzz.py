@@ -656,6 +656,52 @@ def fuzz_algebra(n, seed, dtype):
             norm(omf) + norm(xbf),
             8 * tol,
         )
+        # camera_from_parameters (footnote 3): the camera back from theta_c1
+        # times any nonzero scale; against the true camera, or for invalid input against
+        # the same RQ formula in NumPy (where a NaN reaches)
+        lam = rng.choice([-1, 1], n) * 10.0 ** rng.uniform(-2, 2, n)
+        if kind == "near_degenerate":
+            lam = rng.choice([-1, 1], n) * 10.0 ** rng.uniform(-12, 12, n)
+        Rc_true, xc_true = _rotations(rng, n), rng.normal(size=(n, 3)) * 0.2
+        A_true = np.tile(np.eye(3), (n, 1, 1))
+        A_true[:, 0, 0], A_true[:, 0, 1], A_true[:, 0, 2] = fx, sk, cx
+        A_true[:, 1, 1], A_true[:, 1, 2] = fy, cy
+        Mt = A_true @ Rc_true.transpose(0, 2, 1)
+        t1 = np.concatenate([Mt.reshape(n, 9), -np.einsum("nij,nj->ni", Mt, xc_true)], 1)
+        (t1,) = cast(*_poison(rng, kind, t1 * lam[:, None]))
+        got = np.concatenate([np.reshape(x, (n, -1)) for x in _vm(g.camera_from_parameters)(t1)], 1)
+        if kind == "invalid":
+            (t1f,) = f64(t1)
+            M = t1f[:, :9].reshape(n, 3, 3)
+            with np.errstate(all="ignore"):
+                sgn = np.where(np.linalg.det(M) < 0, -1.0, 1.0)
+                sgn[~np.all(np.isfinite(M.reshape(n, -1)), 1)] = np.nan
+                k = sgn / np.linalg.norm(M[:, 2], axis=1)
+                M, b = M * k[:, None, None], t1f[:, 9:] * k[:, None]
+                r3 = M[:, 2]
+                a12 = np.sum(M[:, 1] * r3, 1)
+                v = M[:, 1] - a12[:, None] * r3
+                a11 = np.linalg.norm(v, axis=1)
+                r2 = v / a11[:, None]
+                a01, a02 = np.sum(M[:, 0] * r2, 1), np.sum(M[:, 0] * r3, 1)
+                u = M[:, 0] - a01[:, None] * r2 - a02[:, None] * r3
+                a00 = np.linalg.norm(u, axis=1)
+                r1 = u / a00[:, None]
+                A_ref = np.zeros((n, 3, 3))
+                A_ref[:, 0] = np.stack([a00, a01, a02], 1)
+                A_ref[:, 1, 1:] = np.stack([a11, a12], 1)
+                A_ref[:, 2, 2] = 1.0
+                R_ref = np.stack([r1, r2, r3], 1).transpose(0, 2, 1)
+                y1 = (b[:, 1] - a12 * b[:, 2]) / a11
+                y0 = (b[:, 0] - a01 * y1 - a02 * b[:, 2]) / a00
+                x_ref = -(r1 * y0[:, None] + r2 * y1[:, None] + r3 * b[:, 2:])
+            ref = np.concatenate([A_ref.reshape(n, -1), R_ref.reshape(n, -1), x_ref], 1)
+            record("camera_from_parameters", kind, got, ref, norm(ref), 1e3 * tol)
+        else:
+            ref = np.concatenate([A_true.reshape(n, -1), Rc_true.reshape(n, -1), xc_true], 1)
+            # the RQ factorisation's error grows with the conditioning of A (focal lengths
+            # spanning 10..1e4 px against unit rows)
+            record("camera_from_parameters", kind, got, ref, norm(ref), 1e5 * tol)
     return out
 
 

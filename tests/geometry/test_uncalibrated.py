@@ -6,6 +6,7 @@ import numpy as np
 
 from tests.helpers import central_difference
 from visjax.geometry import (
+    camera_from_parameters,
     camera_parameters,
     feature_in_camera,
     intrinsics_eq4,
@@ -82,3 +83,25 @@ def test_jit_vmap_grad():
         R_b, x_b, jnp.stack([omega, omega + 1])
     )
     assert Ws.shape == (2, 3, 12)
+
+
+def test_camera_back_from_its_parameters():
+    """Footnote 3: A, R_c, x_c from theta_c1 at any nonzero scale (either sign), exact;
+    under jit and vmap; the gradient of A_11 against a central difference."""
+    rng = np.random.default_rng(21)
+    configs = [_random_configuration(rng)[:3] for _ in range(6)]
+    thetas = jnp.stack([camera_parameters(A, R, x)[0] for A, R, x in configs])
+    scales = jnp.asarray([1.0, -1.0, 3e-4, -250.0, 7.0, -0.01])
+    A, R, x = jax.jit(jax.vmap(camera_from_parameters))(thetas * scales[:, None])
+    for k, (A0, R0, x0) in enumerate(configs):
+        np.testing.assert_allclose(A[k], A0, rtol=1e-10, atol=1e-9)
+        np.testing.assert_allclose(R[k], R0, atol=1e-12)
+        np.testing.assert_allclose(x[k], x0, atol=1e-12)
+        assert np.isclose(np.linalg.det(R[k]), 1.0)
+
+    def a11(theta):
+        return camera_from_parameters(theta)[0][0, 0]
+
+    g = jax.grad(a11)(thetas[0])
+    fd = central_difference(a11, thetas[0], 1e-6)
+    np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-8)

@@ -39,6 +39,7 @@ from ._so3 import (
     vee as vee,
 )
 from ._uncalibrated import (
+    camera_from_parameters as camera_from_parameters,
     camera_parameters as camera_parameters,
     feature_in_camera as feature_in_camera,
     intrinsics_eq4 as intrinsics_eq4,

@@ -151,3 +151,50 @@ def known_feature_regressors(
     W = jnp.concatenate([jnp.kron(eye, q[None, :]), eye], axis=1)
     Pi = jnp.concatenate([q, jnp.ones((1,), q.dtype)])[None, :]
     return W, Pi
+
+
+def camera_from_parameters(
+    theta_c1: Float[ArrayLike, "12"],
+) -> tuple[Float[Array, "3 3"], Float[Array, "3 3"], Float[Array, "3"]]:
+    """$A$, $R_c$, $x_c$ back from the camera parameters (the paper's footnote 3).
+
+    $\\theta_{c1}$ holds $M = A R_c^T$ and $b = -M x_c$ up to a common scale $\\lambda$
+    (module docstring). The third row of $A$ is $[0, 0, 1]$, so the third row of $M$ is
+    the unit row $r_3$ of $R_c^T$: $|\\lambda| = \\|M_3\\|$; and $\\det M = \\lambda^3
+    A_{11}A_{22}$ with positive focal lengths, so the sign of $\\lambda$ is that of
+    $\\det M$ (a right-handed $R_c$). ($\\theta_{c2}$ repeats $r_3$ and $c = b_3$ with its
+    own scale in the estimator, so it is not needed.) Then an
+    RQ factorisation, row by row from the bottom (Gram-Schmidt): $M_2 = A_{22} r_2 + A_{23}
+    r_3$ and $M_1 = A_{11} r_1 + A_{12} r_2 + A_{13} r_3$ with positive $A_{11}$, $A_{22}$;
+    $R_c = [r_1; r_2; r_3]^T$ and $x_c = -M^{-1} b = -R_c A^{-1} b$.
+
+    With estimated parameters $R_c$ is orthonormal and right-handed by construction; how
+    far the estimate is from a camera shows in the residual $M - A R_c^T$ (zero here by
+    construction) only through $A$: check that its entries are plausible.
+
+    No error path: NaN in, NaN out.
+    """
+    theta_c1 = as_float(theta_c1)
+    check_shape(theta_c1, (12,), "theta_c1")
+    M, b = theta_c1[:9].reshape(3, 3), theta_c1[9:]
+    sign = jnp.where(jnp.linalg.det(M) < 0.0, -1.0, 1.0)
+    sign = jnp.where(jnp.all(jnp.isfinite(M)), sign, jnp.nan)  # no sign a NaN decided
+    scale = sign / jnp.linalg.norm(M[2])
+    M, b = scale * M, scale * b
+    r3 = M[2]
+    a12 = M[1] @ r3
+    v = M[1] - a12 * r3
+    a11 = jnp.linalg.norm(v)
+    r2 = v / a11
+    a01, a02 = M[0] @ r2, M[0] @ r3
+    u = M[0] - a01 * r2 - a02 * r3
+    a00 = jnp.linalg.norm(u)
+    r1 = u / a00
+    z, o = jnp.zeros_like(a00), jnp.ones_like(a00)
+    A = jnp.stack([jnp.stack([a00, a01, a02]), jnp.stack([z, a11, a12]), jnp.stack([z, z, o])])
+    R_c = jnp.stack([r1, r2, r3]).T
+    # x_c = -M^{-1} b = -R_c A^{-1} b, with A^{-1} b by back substitution (A_33 = 1)
+    y1 = (b[1] - a12 * b[2]) / a11
+    y0 = (b[0] - a01 * y1 - a02 * b[2]) / a00
+    x_c = -(r1 * y0 + r2 * y1 + r3 * b[2])
+    return A, R_c, x_c
