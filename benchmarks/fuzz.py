@@ -494,6 +494,13 @@ def fuzz_algebra(n, seed, dtype):
         # intrinsic_matrix, intrinsics_eq4, normalized_to_pixel
         fx, fy = (10.0 ** rng.uniform(1, 4, n) for _ in range(2))
         cx, cy, sk = rng.uniform(0, 1000, n), rng.uniform(0, 1000, n), rng.normal(0, 5, n)
+
+        def intrinsics():
+            """This kind's random intrinsic matrices (eq. (15)), a fresh copy each call."""
+            A = np.tile(np.eye(3), (n, 1, 1))
+            A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 1, 1], A[:, 1, 2] = fx, sk, cx, fy, cy
+            return A
+
         args = np.stack([fx, fy, cx, cy, sk], 1)
         if kind == "near_degenerate":
             args[:, :2] = 10.0 ** rng.uniform(-9, 9, (n, 2))
@@ -522,8 +529,7 @@ def fuzz_algebra(n, seed, dtype):
         got = _vm(lambda z: g.intrinsics_eq4(z[0], z[1], z[2], z[3], z[4], z[5]))(e4)
         record("intrinsics_eq4", kind, got, ref, norm(ref), 16 * tol)
         m = _magnitudes(rng, kind, n, (2,))
-        A = np.tile(np.eye(3), (n, 1, 1))
-        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 1, 1], A[:, 1, 2] = fx, sk, cx, fy, cy
+        A = intrinsics()
         m, A = cast(*_poison(rng, kind, m, A))
         mf, Af = f64(m, A)
         # eq. (15) for an upper-triangular A (the entries below the diagonal are not read)
@@ -554,8 +560,7 @@ def fuzz_algebra(n, seed, dtype):
 
         # euclidean_homography / projective_homography: backward error against A^-1 G A,
         # relative to |A^-1| |G| |A|; an unusable A gives all NaN (documented)
-        A = np.tile(np.eye(3), (n, 1, 1))
-        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 1, 1], A[:, 1, 2] = fx, sk, cx, fy, cy
+        A = intrinsics()
         H = _rotations(rng, n) + 0.1 * rng.normal(size=(n, 3, 3))
         if kind == "near_degenerate":
             A[:, 0, 0] = 10.0 ** rng.uniform(-6, 6, n)
@@ -590,8 +595,7 @@ def fuzz_algebra(n, seed, dtype):
         if kind == "near_degenerate":  # far from the origin, features near the platform
             x_b *= 10.0 ** rng.uniform(3, 8, (n, 1))
             omega = x_b + 10.0 ** rng.uniform(-6, 0, (n, 1)) * rng.normal(size=(n, 3))
-        A = np.tile(np.eye(3), (n, 1, 1))
-        A[:, 0, 0], A[:, 0, 1], A[:, 0, 2], A[:, 1, 1], A[:, 1, 2] = fx, sk, cx, fy, cy
+        A = intrinsics()
         R_b, R_c, x_b, x_c, omega, A = cast(*_poison(rng, kind, R_b, R_c, x_b, x_c, omega, A))
         Rbf, Rcf, xbf, xcf, omf, Af = f64(R_b, R_c, x_b, x_c, omega, A)
         M = Af @ Rcf.transpose(0, 2, 1)
@@ -663,9 +667,7 @@ def fuzz_algebra(n, seed, dtype):
         if kind == "near_degenerate":
             lam = rng.choice([-1, 1], n) * 10.0 ** rng.uniform(-12, 12, n)
         Rc_true, xc_true = _rotations(rng, n), rng.normal(size=(n, 3)) * 0.2
-        A_true = np.tile(np.eye(3), (n, 1, 1))
-        A_true[:, 0, 0], A_true[:, 0, 1], A_true[:, 0, 2] = fx, sk, cx
-        A_true[:, 1, 1], A_true[:, 1, 2] = fy, cy
+        A_true = intrinsics()
         Mt = A_true @ Rc_true.transpose(0, 2, 1)
         t1 = np.concatenate([Mt.reshape(n, 9), -np.einsum("nij,nj->ni", Mt, xc_true)], 1)
         (t1,) = cast(*_poison(rng, kind, t1 * lam[:, None]))
