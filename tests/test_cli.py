@@ -67,7 +67,7 @@ def test_out_that_is_a_file_is_refused_before_any_work(capsys, tmp_path):
     assert target.read_text() == "keep me"
 
 
-def test_a_failing_command_leaves_nothing_behind(tmp_path, monkeypatch):
+def test_a_failing_command_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
     from visjax import report
 
     def half_written(*args, out=None, **kwargs):
@@ -76,8 +76,9 @@ def test_a_failing_command_leaves_nothing_behind(tmp_path, monkeypatch):
 
     monkeypatch.setattr(report, "euclidean_report", half_written)
     out = tmp_path / "out"
-    with pytest.raises(RuntimeError, match="simulation failed"):
-        main(["euclidean", "--out", str(out)])
+    assert main(["euclidean", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert err == "visjax: error: the simulation failed\n"  # one line, no traceback
     assert not out.exists()
     assert list(tmp_path.iterdir()) == []  # no staging folder either
 
@@ -164,3 +165,40 @@ def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch)
         assert err.startswith("visjax: error:") and "is not writable" in err, err
     assert list(locked.iterdir()) == []
     locked.chmod(0o755)
+
+
+def test_velocity_on_a_data_file(tmp_path, capsys):
+    """`visjax velocity --data FILE` on the example scene (not the paper's): the recovered
+    z1* and, since the file has the truth, `rms_last_half`; a bad file is one line."""
+    import sys
+
+    import numpy as np
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "examples"))
+    from make_example_data import velocity_example
+
+    data = velocity_example(duration=1.0, noise_px=0.0)  # 2% of the features missing
+    path = data.save(tmp_path / "v.npz")
+    out = tmp_path / "out"
+    assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    z1_true = 1.5 + (data.R_star @ data.s1)[2]  # the plate starts at x0 = [0.05, -0.03, 1.5]
+    assert abs(summary["z1_star"] - z1_true) < 1e-9
+    assert len(summary["rms_last_half"]) == 6
+    assert max(summary["rms_last_half"]) < 0.05  # noise-free, 0.5-1 s: converging
+    est = np.load(out / "estimate.npz")
+    assert est["v_hat"].shape == (1000, 6) and est["v_object"].shape == (1000, 6)
+    # without the truth: no errors reported
+    data.velocity = None
+    data.save(tmp_path / "v2.npz")
+    capsys.readouterr()
+    assert main(["velocity", "--data", str(tmp_path / "v2.npz"), "--quiet"]) == 0
+    assert "RMS" not in capsys.readouterr().out
+    bad = dict(np.load(path))
+    del bad["A"]
+    np.savez(tmp_path / "bad.npz", **bad)
+    assert main(["velocity", "--data", str(tmp_path / "bad.npz"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("visjax: error:") and "'A'" in err and err.count("\n") == 1
+    with pytest.raises(SystemExit):
+        main(["velocity", "--data", str(tmp_path / "missing.npz")])

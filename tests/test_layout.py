@@ -15,6 +15,7 @@ LAYERS = [
     "baselines",
     "design",
     "frontend",
+    "io",
     "papers",
     "studies",
 ]

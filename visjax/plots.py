@@ -37,26 +37,32 @@ DOF_LABELS = (
 
 
 def plot_velocity(ts, velocity, estimate, *, title=None, path=None, max_points=2000):
-    """Like Fig. 2 of seed 000: per DOF, true and estimated velocity (left), error (right)."""
+    """Like Fig. 2 of Chitrakaran et al.: per DOF, true and estimated velocity (left), error
+    (right); with `velocity=None` (no truth), the estimate alone."""
     plt = _pyplot(path)
 
-    ts, velocity, estimate = (np.asarray(x) for x in (ts, velocity, estimate))
+    ts, estimate = np.asarray(ts), np.asarray(estimate)
     step = max(1, len(ts) // max_points)
-    t, v, e = ts[::step], velocity[::step], estimate[::step]
-    fig, axes = plt.subplots(6, 2, figsize=(11, 12), sharex=True)
+    t, e = ts[::step], estimate[::step]
+    truth = velocity is not None
+    cols = 2 if truth else 1
+    fig, axes = plt.subplots(6, cols, figsize=(11 if truth else 6, 12), sharex=True, squeeze=False)
     for i, (name, unit) in enumerate(DOF_LABELS):
         ax = axes[i, 0]
-        ax.plot(t, v[:, i], "k-", lw=1.5, label="true")
         ax.plot(t, e[:, i], "C1-", lw=0.8, label="estimate $J^{-1}\\hat\\kappa$")
         ax.set_ylabel(f"{name} [{unit}]")
-        axes[i, 1].plot(t, v[:, i] - e[:, i], "C0-", lw=0.8)
-        axes[i, 1].set_ylabel(f"error {name} [{unit}]")
-        axes[i, 1].axhline(0.0, color="0.7", lw=0.5)
+        if truth:
+            v = np.asarray(velocity)[::step]
+            ax.plot(t, v[:, i], "k--", lw=1.2, label="true")
+            axes[i, 1].plot(t, v[:, i] - e[:, i], "C0-", lw=0.8)
+            axes[i, 1].set_ylabel(f"error {name} [{unit}]")
+            axes[i, 1].axhline(0.0, color="0.7", lw=0.5)
     axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[0, 0].set_title("velocity")
-    axes[0, 1].set_title("velocity error $v - \\hat v$")
     axes[-1, 0].set_xlabel("time [s]")
-    axes[-1, 1].set_xlabel("time [s]")
+    if truth:
+        axes[0, 1].set_title("velocity error $v - \\hat v$")
+        axes[-1, 1].set_xlabel("time [s]")
     return _finish(fig, title, path)
 
 

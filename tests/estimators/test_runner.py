@@ -317,3 +317,39 @@ def test_the_solvers_own_result_code_is_kept():
     sol = run(Diverging(), _stream(400, dt=0.01), solver=FlakySolver(), throw=False)
     assert sol.result == RESULTS.promote(diffrax.RESULTS.nonlinear_divergence)
     assert int(sol.failed_sample) == 40  # (1.01)^41 > 1.5 first from sample 40
+
+
+def test_dropped_samples_are_held_over():
+    """`Stream.present`: a dropped sample (NaN or not) is as if it never arrived: the
+    previous present sample is held, exactly as a stream without it, and the reducer's
+    truth stays at the grid's own sample."""
+    est = LinearObserver(a=5.0, b=[1.0, -1.0])
+    stream = _stream(200)
+    rng = np.random.default_rng(0)
+    present = rng.random(200) > 0.1
+    present[0] = True
+    latest = np.maximum.accumulate(np.where(present, np.arange(200), 0))
+    ys = np.asarray(stream.ys).copy()
+    ys[~present] = np.nan  # a dropped sample may hold anything
+    dropped = Stream(ts=stream.ts, ys=jnp.asarray(ys), truth=stream.truth, present=present)
+    held = Stream(ts=stream.ts, ys=stream.ys[latest], truth=stream.truth)
+    for dt in (None, 2.5e-3):
+        a = run(est, dropped, dt=dt, saveat=SaveAt(states=True))
+        b = run(est, held, dt=dt, saveat=SaveAt(states=True))
+        assert a.result == RESULTS.successful
+        np.testing.assert_allclose(a.states, b.states, rtol=1e-13, atol=1e-15)
+    # the reducer scores against the truth of the arrived sample, not the held one
+    truth = stream.ys  # the signal itself as "truth" of 2 * state
+    red = WindowRMS(0.0, 2.0)
+    a = run(est, Stream(ts=stream.ts, ys=dropped.ys, truth=truth, present=present), reducer=red)
+    b = run(est, Stream(ts=stream.ts, ys=held.ys, truth=truth), reducer=red)
+    np.testing.assert_allclose(a.summary.rms, b.summary.rms, rtol=1e-12)
+    c = run(est, Stream(ts=stream.ts, ys=held.ys, truth=truth[latest]), reducer=red)
+    assert not np.allclose(a.summary.rms, c.summary.rms, rtol=1e-6)
+    # the first sample must be present; a wrong shape is refused
+    first_missing = present.copy()
+    first_missing[0] = False
+    with pytest.raises(ValueError, match="first sample"):
+        run(est, Stream(ts=stream.ts, ys=stream.ys, present=first_missing))
+    with pytest.raises(ValueError, match="present"):
+        run(est, Stream(ts=stream.ts, ys=stream.ys, present=present[:10]))

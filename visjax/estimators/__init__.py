@@ -23,6 +23,7 @@ from ._base import (
     WindowSummary as WindowSummary,
     run as run,
 )
+from ._filters import lowpass as lowpass, lowpass_delay as lowpass_delay
 from ._uio import (
     MovingCameraMeasurement as MovingCameraMeasurement,
     UIOOutput as UIOOutput,

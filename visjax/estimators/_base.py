@@ -83,6 +83,10 @@ class AbstractEstimator(eqx.Module):
         return jnp.array(jnp.inf)
 
 
+def _as_flags(x):
+    return None if x is None else jnp.asarray(x, dtype=bool)
+
+
 @final
 class Stream(eqx.Module):
     """A sampled measurement stream: every leaf has the sample index first.
@@ -93,11 +97,16 @@ class Stream(eqx.Module):
     - `ys`: the measurements the estimator sees, a pytree of arrays of leading size N.
     - `truth`: optional ground truth of leading size N, never shown to the estimator; a
         `reducer` of `run` receives it (to accumulate errors without saving outputs).
+    - `present`: optional boolean (N,): `False` marks a dropped sample (a frame lost, a
+        tracked point occluded). `run` treats it as if it never arrived: the estimator goes
+        on holding the latest present sample and no `jump` fires. Sample 0 must be
+        present. `None`: every sample is present.
     """
 
     ts: Float[Array, " N"]
     ys: PyTree
     truth: PyTree = None
+    present: Bool[Array, " N"] | None = eqx.field(default=None, converter=_as_flags)
 
 
 @final
@@ -246,6 +255,11 @@ def _check_stream(stream: Stream) -> int:
     if jnp.ndim(ts) != 1 or jnp.shape(ts)[0] < 2:
         raise ValueError(f"`stream.ts` must have shape (N,) with N >= 2; got {jnp.shape(ts)}.")
     n = jnp.shape(ts)[0]
+    if stream.present is not None and jnp.shape(stream.present) != (n,):
+        raise ValueError(
+            f"`stream.present` must have shape ({n},), one flag per sample; got "
+            f"{jnp.shape(stream.present)}."
+        )
     for name, tree in (("ys", stream.ys), ("truth", stream.truth)):
         for leaf in jax.tree_util.tree_leaves(tree):
             if jnp.ndim(leaf) < 1 or jnp.shape(leaf)[0] != n:
@@ -379,6 +393,9 @@ def run(
     if not isinstance(adjoint, AbstractAdjoint):
         raise ValueError(f"`adjoint` must be an AbstractAdjoint; got {type(adjoint).__name__}.")
     n_steps = n if dt is None else _n_steps(stream.ts, dt)
+    present0 = None if stream.present is None else _concrete(stream.present[0])
+    if present0 is not None and not present0:
+        raise ValueError("`stream.present[0]` is False: the first sample must be present.")
     y0 = jax.tree_util.tree_map(lambda x: x[0], stream.ys)
     h_max = jnp.max(jnp.diff(stream.ts)) if dt is None else jnp.asarray(dt)
     _precheck(estimator, y0, h_max, solver)
@@ -390,6 +407,12 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
     ts, ys, truth = stream.ts, stream.ys, stream.truth
     n = ts.shape[0]
     last = n_steps - 1
+    if stream.present is None:
+        latest = None
+    else:
+        # the latest present sample at or before each sample (a dropped sample is held over)
+        idx = jnp.where(stream.present, jnp.arange(n, dtype=jnp.int32), -1)
+        latest = jnp.maximum(jax.lax.cummax(idx), 0).astype(jnp.int32)
     # The grid, the held sample and its arrival are computed per step from a counter, so
     # the loop carries no per-step arrays (reverse-mode memory is what `adjoint` stores).
     if dt is None:
@@ -397,7 +420,7 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
         def grid_time(j):
             return ts[j]
 
-        def held_sample(j):
+        def arrived_sample(j):
             return j
 
         h_max = jnp.max(jnp.diff(ts))
@@ -407,11 +430,16 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
         def grid_time(j):
             return ts[0] + j.astype(ts.dtype) * dt_
 
-        def held_sample(j):
+        def arrived_sample(j):
             arrived = jnp.searchsorted(ts, grid_time(j) + 1e-6 * dt_, side="right") - 1
             return jnp.clip(jax.lax.stop_gradient(arrived), 0, n - 1).astype(jnp.int32)
 
         h_max = dt_
+
+    def held_sample(j):
+        """The sample the estimator holds at grid step j: the latest arrived and present."""
+        k = arrived_sample(j)
+        return k if latest is None else latest[k]
 
     def at(tree, k):
         return jax.tree_util.tree_map(lambda x: x[k], tree)
@@ -431,6 +459,8 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
     r = RESULTS.where(~stable, RESULTS.unstable_step, r)
     # a bad first sample is named as such, not by the step bound computed from it
     r = RESULTS.where(~all_finite(y0), RESULTS.nonfinite_measurement, r)
+    if stream.present is not None:
+        r = RESULTS.where(stream.present[0], r, RESULTS.nonfinite_measurement)
     r = RESULTS.where(~settings_ok, RESULTS.invalid_settings, r)
     failed = jnp.where(r == RESULTS.successful, -1, 0).astype(jnp.int32)
 
@@ -457,7 +487,7 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
         if save or reducer is not None:
             out = estimator.output(t0, state, y)
             if reducer is not None:
-                acc = reducer.update(acc, t0, out, at(truth, k))
+                acc = reducer.update(acc, t0, out, at(truth, arrived_sample(j)))
             if save:
                 saved = (
                     out if saveat.outputs else None,

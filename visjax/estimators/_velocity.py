@@ -19,7 +19,7 @@ from typing import final
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, raise_or_keep
 from .._util import as_float, check_points, check_shape, positive_finite
@@ -129,6 +129,7 @@ def velocity_measurements(
     z1_star: Float[ArrayLike, ""],
     n_star: Float[ArrayLike, "3"],
     *,
+    visible: Bool[ArrayLike, " n"] | None = None,
     throw: bool = True,
 ) -> VelocityMeasurement:
     """$e$, $J$ and $J^{-1}$ of one frame (seed 000, sections 3-5). Vmap it over frames.
@@ -139,7 +140,10 @@ def velocity_measurements(
     **Arguments:** `p_ref`, `p_cur` reference and current pixels, feature 1 first; `A`;
     `R_star` the known reference orientation; `s1` feature 1 in the object frame; `z1_star`
     its reference depth (`depth_from_known_length`); `n_star` the plane normal
-    (`plane_normal_from_frames`); `throw` as in `euclidean_reconstruction`.
+    (`plane_normal_from_frames`); `visible`: optional (n,) booleans, the features seen in
+    this frame (the homography is fitted to these; of more than four features at least
+    four must be seen; feature 1 may be among the missing: its pixel then follows from the
+    homography, $p_1 \sim G_n p_1^*$, eq. (17)); `throw` as in `euclidean_reconstruction`.
 
     **Returns:** a `VelocityMeasurement`; with `throw=False` its `result` says whether the
     frame was measured (a failed frame is all NaN).
@@ -150,8 +154,13 @@ def velocity_measurements(
     check_shape(R_star, (3, 3), "R_star")
     s1 = as_float(s1)
     check_shape(s1, (3,), "s1")
-    rec = euclidean_reconstruction(p_ref, p_cur, A, n_star=n_star, throw=False)
+    rec = euclidean_reconstruction(p_ref, p_cur, A, n_star=n_star, visible=visible, throw=False)
     p_cur = as_float(p_cur)
+    if visible is not None:
+        # feature 1 out of view: its pixel from the homography of the others (eq. (17))
+        g = rec.G_n @ to_homogeneous(p_ref[0])
+        p1 = jnp.where(visible[0], p_cur[0], g[:2] / g[2])
+        p_cur = p_cur.at[0].set(p1)
     # a failed frame is reported by its result (and NaN-filled below), never by so3_log
     R_bar = jnp.where(rec.result == RESULTS.successful, rec.R_bar, jnp.eye(3, dtype=A.dtype))
     e = error_signal(p_cur[0], p_ref[0], rec.alpha[0], R_bar)
@@ -270,7 +279,7 @@ def depth_from_feature_length(
     **Returns:** $z_1^*$ (the sign of `n_star` does not matter: it is taken with
     $n^{*T} m_1^* > 0$, eq. (4)); a runtime error if the two features coincide in the
     image, or if the depth is not positive (a feature on the other side of the camera, or
-    $L \le 0$).
+    $L \\le 0$).
     """
     p_ref = check_points(p_ref, "p_ref", min_points=2)
     A, n_star = as_float(A), as_float(n_star)
@@ -336,19 +345,38 @@ def plane_normal_from_frames(
     p_frames: Float[ArrayLike, "N n 2"],
     A: Float[ArrayLike, "3 3"],
     n_prior: Float[ArrayLike, "3"] | None = None,
+    *,
+    visible: Bool[ArrayLike, "N n"] | None = None,
 ) -> Float[Array, "3"]:
     """The constant plane normal $n^*$ from a sequence of frames.
 
     Each frame is decomposed with the general method (eq. (12)); near the reference pose the
     normal is ill-determined (it is undefined at $H = I$), so the normals are averaged with
     weights $\\|\\bar x_h\\|^2$. Frames whose reconstruction fails get weight 0.
+    `visible` (N, n), optional: the features seen in each frame (`euclidean_reconstruction`).
     """
     p_frames = as_float(p_frames)
     if p_frames.ndim != 3:
         raise ValueError(f"`p_frames` must have shape (N, n, 2); got {tuple(p_frames.shape)}.")
-    rec = jax.vmap(lambda pc: euclidean_reconstruction(p_ref, pc, A, n_prior, throw=False))(
-        p_frames
-    )
+    if visible is not None:
+        visible = jnp.asarray(visible)
+        if visible.shape != p_frames.shape[:2]:
+            raise ValueError(
+                f"`visible` must have shape {tuple(p_frames.shape[:2])}; got {visible.shape}."
+            )
+    return _normal_from_frames(p_ref, p_frames, A, n_prior, visible)
+
+
+@eqx.filter_jit
+def _normal_from_frames(p_ref, p_frames, A, n_prior, visible):
+    if visible is None:
+        rec = jax.vmap(lambda pc: euclidean_reconstruction(p_ref, pc, A, n_prior, throw=False))(
+            p_frames
+        )
+    else:
+        rec = jax.vmap(
+            lambda pc, v: euclidean_reconstruction(p_ref, pc, A, n_prior, visible=v, throw=False)
+        )(p_frames, visible)
     w = jnp.where(rec.result == RESULTS.successful, jnp.sum(rec.x_h**2, axis=-1), 0.0)
     n = jnp.sum(w[:, None] * rec.n_star, axis=0)
     n = eqx.error_if(
@@ -466,6 +494,20 @@ class VelocityEstimator(AbstractEstimator):
         return big < self.bound
 
 
+@eqx.filter_jit
+def _measure_frames(p_ref, pixels, A, R_star, s1, z1_star, n_star, visible, throw):
+    """`velocity_measurements` of every frame, vmapped (compiled once per shape)."""
+    if visible is None:
+        return jax.vmap(
+            lambda pc: velocity_measurements(p_ref, pc, A, R_star, s1, z1_star, n_star, throw=throw)
+        )(pixels)
+    return jax.vmap(
+        lambda pc, v: velocity_measurements(
+            p_ref, pc, A, R_star, s1, z1_star, n_star, visible=v, throw=False
+        )
+    )(pixels, visible)
+
+
 def fixed_camera_stream(
     ts: Float[ArrayLike, " N"],
     pixels: Float[ArrayLike, "N n 2"],
@@ -479,6 +521,7 @@ def fixed_camera_stream(
     n_prior: Float[ArrayLike, "3"] | None = None,
     known_length: tuple | None = None,
     reference_pixels: Float[ArrayLike, "n 2"] | None = None,
+    dropouts: bool = False,
     truth=None,
     throw: bool = True,
 ):
@@ -497,6 +540,12 @@ def fixed_camera_stream(
     With `throw=False` a frame that cannot be measured (a NaN pixel, degenerate points)
     is all NaN in the stream, and `run` stops there with `RESULTS.nonfinite_measurement`
     and its index; with `throw=True` building the stream raises.
+
+    With `dropouts=True` a NaN pixel is a feature out of view in that frame (the reference
+    pixels must all be finite): the homography is fitted to the features seen (with more
+    than four features, any four or more; feature 1 may be among the missing), and a frame
+    with too few is marked absent in `Stream.present`, so that `run` holds the previous
+    frame over it. The first frame must be measurable.
 
     **Returns:** `(stream, n_star, z1_star)`.
     """
@@ -517,15 +566,30 @@ def fixed_camera_stream(
                 f"`reference_pixels` must have the frames' shape {tuple(pixels.shape[1:])};"
                 f" got {tuple(p_ref.shape)}."
             )
+    visible = None
+    if dropouts:
+        visible = jnp.all(jnp.isfinite(pixels), axis=-1)
+        if not jnp.all(jnp.isfinite(p_ref)):
+            raise ValueError(
+                "with `dropouts=True` the reference image must show every feature: "
+                "a reference pixel is not finite."
+            )
     if n_star is None:
-        n_star = plane_normal_from_frames(p_ref, pixels, A, n_prior)
+        n_star = plane_normal_from_frames(p_ref, pixels, A, n_prior, visible=visible)
     if z1_star is None and known_length is not None:
         z1_star = depth_from_feature_length(p_ref, A, n_star, known_length)
     if z1_star is None:
         if origin_pixel is None:
             origin_pixel = diagonal_intersection(p_ref)
         z1_star = depth_from_known_length(p_ref[0], origin_pixel, A, n_star, R_star, s1)
-    ys = jax.vmap(
-        lambda pc: velocity_measurements(p_ref, pc, A, R_star, s1, z1_star, n_star, throw=throw)
-    )(pixels)
-    return Stream(ts=ts, ys=ys, truth=truth), n_star, z1_star
+    ys = _measure_frames(p_ref, pixels, A, R_star, s1, z1_star, n_star, visible, throw)
+    if visible is None:
+        return Stream(ts=ts, ys=ys, truth=truth), n_star, z1_star
+    present = ys.result == RESULTS.successful
+    # the first frame starts the estimator: it must be measured
+    first_ok = present[0]
+    if throw:
+        present = eqx.error_if(
+            present, ~first_ok, "fixed_camera_stream: the first frame cannot be measured."
+        )
+    return Stream(ts=ts, ys=ys, truth=truth, present=present), n_star, z1_star

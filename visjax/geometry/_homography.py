@@ -28,11 +28,18 @@ def _rcond_tol(dtype) -> float:
     return eps**0.5 if eps < 1e-10 else eps ** (1.0 / 3.0)
 
 
-def _normalising_transform(p):
-    """Hartley's similarity: centroid to the origin, RMS distance to sqrt(2)."""
-    c = jnp.mean(p, axis=0)
-    d = p - c[None, :]
-    ms = jnp.mean(jnp.sum(d**2, axis=1))
+def _normalising_transform(p, w=None):
+    """Hartley's similarity: centroid to the origin, RMS distance to sqrt(2); with weights
+    `w` (0 or 1 per point), over the points of weight 1 only."""
+    if w is None:
+        c = jnp.mean(p, axis=0)
+        d = p - c[None, :]
+        ms = jnp.mean(jnp.sum(d**2, axis=1))
+    else:
+        total = jnp.maximum(jnp.sum(w), 1.0)
+        c = jnp.sum(w[:, None] * p, axis=0) / total
+        d = (p - c[None, :]) * w[:, None]
+        ms = jnp.sum(d**2) / total
     ms_safe = jnp.where(ms > 0.0, ms, 1.0)
     s = jnp.sqrt(2.0 / ms_safe)
     return c, s, d * s
@@ -81,19 +88,34 @@ def _design(q_ref, q_cur):
     return M, b
 
 
-def _dlt(p_ref, p_cur):
-    """Normalized DLT. Returns `(G_n, result)`; `G_n` is finite whatever the input."""
+def _dlt(p_ref, p_cur, visible=None):
+    """Normalized DLT. Returns `(G_n, result)`; `G_n` is finite whatever the input.
+
+    `visible` (n,) bool, optional: only these points enter (the others' current pixels may
+    be anything, NaN included: features that dropped out of view)."""
     dtype = jnp.result_type(p_ref, p_cur)
     n = p_ref.shape[0]
+    w = None
+    if visible is not None:
+        w = visible.astype(dtype)
+        p_cur = jnp.where(visible[:, None], p_cur, 0.0)
     nonfinite = ~(jnp.all(jnp.isfinite(p_ref)) & jnp.all(jnp.isfinite(p_cur)))
     p_ref = jnp.where(nonfinite, jnp.zeros_like(p_ref), p_ref)
     p_cur = jnp.where(nonfinite, jnp.zeros_like(p_cur), p_cur)
 
-    c_ref, s_ref, q_ref = _normalising_transform(p_ref)
-    c_cur, s_cur, q_cur = _normalising_transform(p_cur)
+    c_ref, s_ref, q_ref = _normalising_transform(p_ref, w)
+    c_cur, s_cur, q_cur = _normalising_transform(p_cur, w)
     M, b = _design(q_ref, q_cur)
+    if w is not None:
+        ww = jnp.concatenate([w, w])
+        M, b = M * ww[:, None], b * ww
 
     tol = _rcond_tol(dtype)
+    if n == 4 and visible is not None:
+        # four points, one of them out of view: no homography
+        n_visible_ok = jnp.all(visible)
+    else:
+        n_visible_ok = jnp.array(True)
     if n == 4:
         # Exactly determined: a homography exists and is unique iff no three of the four
         # points are collinear (or coincident) in either image. Check the four triangle
@@ -125,7 +147,7 @@ def _dlt(p_ref, p_cur):
     # Undo the normalisations: G = T_cur^{-1} G_hat T_ref.
     G = _similarity_inv(s_cur, c_cur) @ G_hat @ _similarity(s_ref, c_ref)
 
-    bad = degenerate | nonfinite
+    bad = degenerate | nonfinite | ~n_visible_ok
     G = jnp.where(bad, jnp.eye(3, dtype=dtype), G)
     g33 = G[2, 2]
     # g33 = 0: the image origin maps to infinity. Compared with the other terms of the

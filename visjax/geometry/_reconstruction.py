@@ -11,7 +11,7 @@ from typing import final
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, all_finite, intrinsics_ok, raise_or_keep
 from .._util import as_float, check_shape
@@ -56,6 +56,7 @@ def euclidean_reconstruction(
     n_prior: Float[ArrayLike, "3"] | None = None,
     *,
     n_star: Float[ArrayLike, "3"] | None = None,
+    visible: Bool[ArrayLike, " n"] | None = None,
     throw: bool = True,
 ) -> Reconstruction:
     """Euclidean reconstruction of seed 000, section 3, from pixels and $A$.
@@ -82,6 +83,10 @@ def euclidean_reconstruction(
     - `A`: the intrinsic matrix.
     - `n_prior`: the prior normal used to choose between the two physical solutions.
     - `n_star`: a known plane normal; switches to the known-normal path.
+    - `visible`: optional (n,) booleans: the current pixels of the points marked `False`
+        (features out of view, occluded) are ignored, whatever they hold (NaN included);
+        the homography comes from the others (at least 4, of more than 4 points), and
+        every $\alpha_i$ still follows, from the reference pixels (eq. (17)).
     - `throw`: if `True` (default), degenerate points, non-finite pixels, a point behind
         the camera or no physical solution raise at run time; with `False` the failure is
         reported in `result` instead.
@@ -100,7 +105,14 @@ def euclidean_reconstruction(
     n_prior = n_prior.astype(dtype)
     n_prior = n_prior / jnp.linalg.norm(n_prior)
 
-    G_n, result = _dlt(p_ref, p_cur)
+    if visible is not None:
+        visible = jnp.asarray(visible)
+        if visible.shape != p_ref.shape[:1] or visible.dtype != bool:
+            raise ValueError(
+                f"`visible` must be booleans of shape ({p_ref.shape[0]},); got "
+                f"{visible.dtype} {tuple(visible.shape)}."
+            )
+    G_n, result = _dlt(p_ref, p_cur, visible)
 
     # alpha_i g33 of eq. (17): all of one sign, the sign of g33, since alpha_i > 0.
     w = to_homogeneous(p_ref) @ G_n[2]

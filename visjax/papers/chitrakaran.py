@@ -40,7 +40,16 @@ from ..estimators import (
     fixed_camera_stream,
     run,
 )
-from ..sim import add_pixel_noise, fixed_camera_pixels, integrate_twist, sample_times
+from ..sim import (
+    CameraRig,
+    Sampler,
+    add_pixel_noise,
+    integrate_twist,
+    object_points,
+    points_in_camera,
+    sinusoidal_trajectory,
+    view,
+)
 
 A_EQ62 = ((1268.16, 0.0, 257.49), (0.0, 1267.50, 253.10), (0.0, 0.0, 1.0))
 R_STAR_EQ61 = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
@@ -101,14 +110,22 @@ def section6_scenario(
     - `key`: PRNG key for the noise (required when `noise_px > 0`).
     - `velocity`: $t \\mapsto [v_e, \\omega_e]$; eq. (59) by default.
     """
-    ts = sample_times(duration, rate_hz)
+    ts = Sampler(rate_hz=rate_hz).times(duration)
     dtype = ts.dtype
     A = jnp.array(A_EQ62, dtype)
     R_star = jnp.array(R_STAR_EQ61, dtype)
     x_f_star = jnp.array(X_F_STAR_EQ60, dtype)
     s = jnp.array(FEATURES, dtype)
-    body = integrate_twist(velocity, x_f_star, R_star, ts)
-    pixels = add_pixel_noise(key, fixed_camera_pixels(body, s, A), noise_px)  # eq. (5)
+    if velocity is section6_velocity:
+        # eq. (59): 0.2 sin(t) on all six entries, a sinusoid of 1/(2 pi) Hz
+        body = sinusoidal_trajectory(
+            jnp.full(6, 0.2, dtype), jnp.full(6, 1.0 / (2.0 * jnp.pi), dtype), x_f_star, R_star, ts
+        )
+    else:
+        body = integrate_twist(velocity, x_f_star, R_star, ts)
+    camera = CameraRig(A=A, image_size=None)  # the camera frame is the fixed frame
+    clean = view(camera, points_in_camera(camera, object_points(body, s)))  # eqs. (5), (15)
+    pixels = add_pixel_noise(key, clean, noise_px)
     n_obj = jnp.cross(s[0], s[1])
     n_cam = R_star @ n_obj
     m1_star = x_f_star + R_star @ s[0]

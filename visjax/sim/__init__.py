@@ -15,6 +15,19 @@ from ._rigs import (
     moving_camera_point as moving_camera_point,
     platform_camera_pixels as platform_camera_pixels,
 )
+from ._scene import (
+    CameraRig as CameraRig,
+    Sampler as Sampler,
+    box_features as box_features,
+    constant_twist_trajectory as constant_twist_trajectory,
+    intrinsics as intrinsics,
+    object_points as object_points,
+    planar_features as planar_features,
+    points_in_camera as points_in_camera,
+    sinusoidal_trajectory as sinusoidal_trajectory,
+    spline_trajectory as spline_trajectory,
+    view as view,
+)
 from ._trajectory import (
     Trajectory as Trajectory,
     integrate_twist as integrate_twist,
