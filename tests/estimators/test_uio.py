@@ -174,3 +174,32 @@ def test_the_rank_condition_is_checked_by_the_observer_and_the_design():
     for name in SETS:
         o = observer_for(name)
         assert bool(o._rank_condition()) == rank_condition(o.A, o.C, o.D)
+
+
+def test_D_as_a_vector_and_the_new_fields_defaults():
+    """`D` given as (3,) is the (3, 1) column; `D2`, `A_u`, `K_u`, `P` default to zero (the
+    thesis' observer, unchanged); wrong shapes of the new fields are refused by name."""
+    from visjax.estimators import moving_camera_stream
+
+    s = SETS["II.1"]
+    col = observer_for("II.1")
+    vec = UnknownInputObserver(A=s.A, D=np.array(s.D, float), K=s.K, Y=s.Y, x3_guess=0.01)
+    assert vec.D.shape == (3, 1) and vec.D2.shape == (3, 1)
+    assert not bool(vec.time_varying)
+    assert np.all(np.asarray(vec.disturbance_input()) == 0)
+    sc = moving_camera_scenario("II.1", 0.5)
+    a = run(col, sc.camera_stream(), dt=1e-3, saveat=SaveAt(every=50)).outputs.x_hat
+    b = run(vec, sc.camera_stream(), dt=1e-3, saveat=SaveAt(every=50)).outputs.x_hat
+    np.testing.assert_array_equal(a, b)
+    fields = dict(A=s.A, D=s.D, K=s.K, Y=s.Y, x3_guess=0.01)
+    for name, shape in (("D2", (2,)), ("A_u", (3, 3)), ("K_u", (6, 2, 3)), ("P", (3,))):
+        with pytest.raises(ValueError, match=f"`{name}` must have shape"):
+            UnknownInputObserver(**fields, **{name: np.zeros(shape)})
+    # a dropped first frame has nothing to hold: the run still stops at sample 0
+    pixels = np.asarray(sc.frame_pixels).copy()
+    pixels[0, 1] = np.nan
+    stream = moving_camera_stream(
+        sc.frame_ts, pixels, sc.frame_velocities, sc.Kc_observer, dropped="hold"
+    )
+    out = run(col, stream, dt=1e-3, saveat=SaveAt(outputs=False), throw=False)
+    assert out.result == RESULTS.nonfinite_measurement and int(out.failed_sample) == 0

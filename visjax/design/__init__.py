@@ -3,6 +3,8 @@
 from ._lmi import (
     LMIInfeasibleError as LMIInfeasibleError,
     UIODesign as UIODesign,
+    convergence_rate as convergence_rate,
     design_uio as design_uio,
+    design_uio_for_motion as design_uio_for_motion,
     max_lipschitz as max_lipschitz,
 )

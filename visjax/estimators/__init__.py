@@ -25,6 +25,7 @@ from ._base import (
 )
 from ._filters import lowpass as lowpass, lowpass_delay as lowpass_delay
 from ._uio import (
+    THESIS_A_U as THESIS_A_U,
     MovingCameraMeasurement as MovingCameraMeasurement,
     UIOOutput as UIOOutput,
     UIOState as UIOState,

@@ -3,6 +3,10 @@
 The papers' own scenarios are built from these in `visjax.papers`.
 """
 
+from ._moving_point import (
+    MovingPointScene as MovingPointScene,
+    moving_point_scene as moving_point_scene,
+)
 from ._planar import (
     PlanarScenes as PlanarScenes,
     random_planar_scenes as random_planar_scenes,
