@@ -10,7 +10,6 @@ import pytest
 from visjax import RESULTS
 from visjax.estimators import SaveAt, platform_measurements, platform_stream, run
 from visjax.papers.nath import (
-    DEFAULT_GAINS,
     euclidean_experiment,
     final_errors,
     initial_estimator,
@@ -25,10 +24,11 @@ def runs():
 
 
 def test_structure_converges_noise_free(runs):
-    """Initial errors 10-16 cm; after 20 s every feature within 1.5 mm (measured 0.4-1.1)."""
+    """Initial errors 2-9 cm (each feature on its nominal ray at the known features' median
+    depth); after 20 s every feature within 1.5 mm (measured 0.2-0.9)."""
     r = runs[True]
     err0 = np.linalg.norm(np.asarray(r.omega_s[0] - r.omega_true), axis=-1)
-    assert np.all(err0 > 0.09)
+    assert np.all(err0 > 0.015) and err0.max() > 0.05
     final = final_errors(r)
     assert np.all(final < 1.5e-3), final
     # the camera-parameter prediction error goes to zero: from ~22 px to below 1.5 px
@@ -40,13 +40,14 @@ def test_structure_converges_noise_free(runs):
 
 def test_resetting_and_projection(runs):
     r = runs[True]
+    est = initial_estimator(uncalibrated_scenario(0.01))  # the gains depend on sample 0 only
     assert float(r.resets[-1]) >= 5  # eq. (39): the covariance is reset, about once a second
     lam = np.asarray(r.lambda_min_gamma_c)
-    assert np.all(lam >= DEFAULT_GAINS["eta1"] * (1 - 1e-9))
-    assert np.all(lam <= DEFAULT_GAINS["eta0"] * (1 + 1e-9))
+    assert np.all(lam >= float(est.eta1) * (1 - 1e-9))
+    assert np.all(lam <= float(est.eta0) * (1 + 1e-9))
     for run_ in runs.values():  # every predicted depth stays above the projection margin
-        assert np.asarray(run_.depth_s).min() > DEFAULT_GAINS["eps_s"]
-        assert np.asarray(run_.depth_c).min() > DEFAULT_GAINS["eps_c"]
+        assert np.asarray(run_.depth_s).min() > float(est.eps_s)
+        assert np.asarray(run_.depth_c).min() > float(est.eps_c)
 
 
 def test_pe_measure_detects_a_non_exciting_trajectory(runs):
@@ -69,7 +70,7 @@ def test_vmap_over_noise_seeds_and_grad():
         return jnp.sum((theta_s[:, :3] / theta_s[:, 3:] - sc.omega_s) ** 2)
 
     keys = jax.random.split(jax.random.key(0), 2)
-    g0 = jnp.asarray(DEFAULT_GAINS["gamma_s0"])
+    g0 = initial_estimator(sc).gamma_s0
     batched = jax.jit(jax.vmap(final_error, in_axes=(0, None)))(keys, g0)
     np.testing.assert_allclose(batched[1], final_error(keys[1], g0), rtol=1e-9)
     grad = jax.grad(final_error, argnums=1)(keys[0], g0)
@@ -93,19 +94,27 @@ def test_bad_settings():
 
 
 def test_100hz_logs_with_the_hold_reach_the_1khz_accuracy(runs):
-    """The scenario sampled at 100 Hz: with one Euler step per sample the 1 kHz gains are
-    refused (version 1 ended metres off and called it successful); with dt = 1 ms and the
-    hold it reaches the same millimetre errors as the 1 kHz logs."""
+    """The scenario sampled at 100 Hz: gains derived for 0.1 ms steps are refused with one
+    Euler step per sample (version 1 ended metres off and called it successful); gains for
+    1 ms steps with dt = 1 ms and the hold reach the same millimetre errors as the 1 kHz
+    logs, and 10x better than the same gains with one 10 ms step per sample (measured
+    0.2-0.9 mm against 18-33 mm: accepted by the step bound, whose transient amplification
+    stays below 1e3, but no longer the least-squares law)."""
     sc = uncalibrated_scenario(20.0, 100.0)
-    est = initial_estimator(sc)
     with pytest.raises(ValueError, match="exceeds the Euler stability bound"):
-        run(est, stream(sc))
-    sol = run(est, stream(sc), dt=1e-3, saveat=SaveAt(outputs=False))
-    assert sol.result == RESULTS.successful
-    theta_s = sol.final_state.theta_s
-    errors = np.linalg.norm(np.asarray(theta_s[:, :3] / theta_s[:, 3:] - sc.omega_s), axis=-1)
-    assert np.all(errors < 3e-3), errors  # 1 kHz logs: 0.4-1.1 mm
-    assert np.all(errors < 3 * final_errors(runs[True]) + 1e-3)
+        run(initial_estimator(sc, dt=1e-4), stream(sc))
+    est = initial_estimator(sc, dt=1e-3)  # gains for 1 ms steps
+
+    def errors(sol):
+        assert sol.result == RESULTS.successful
+        theta_s = sol.final_state.theta_s
+        return np.linalg.norm(np.asarray(theta_s[:, :3] / theta_s[:, 3:] - sc.omega_s), axis=-1)
+
+    held = errors(run(est, stream(sc), dt=1e-3, saveat=SaveAt(outputs=False)))
+    assert np.all(held < 3e-3), held  # 1 kHz logs: 0.2-0.9 mm
+    assert np.all(held < 3 * final_errors(runs[True]) + 1e-3)
+    coarse = errors(run(est, stream(sc), saveat=SaveAt(outputs=False)))
+    assert np.median(coarse) > 10 * np.median(held), (coarse, held)
 
 
 def test_a_vanishing_scale_entry_is_a_result_code():
