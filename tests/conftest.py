@@ -28,3 +28,17 @@ def no_jaxtyping():
 
     with without_jaxtyping():
         yield
+
+
+# The slowest modules (each test a minute of compiling in its own process or kernel) run
+# first, so that `pytest -n 2` fills the gaps with the short tests instead of ending on a
+# long tail in one worker.
+_FIRST = ("test_fuzz.py", "test_notebooks.py", "test_uio.py", "test_cli.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    def rank(item):
+        name = item.path.name
+        return _FIRST.index(name) if name in _FIRST else len(_FIRST)
+
+    items.sort(key=rank)  # stable: the order within each group is kept

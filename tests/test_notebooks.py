@@ -17,7 +17,7 @@ NOTEBOOKS = pathlib.Path(__file__).parents[1] / "notebooks"
             {"VISJAX_NB_DURATION": "1"},
             ("z1* recovered", "noise [px]"),
         ),
-        ("uio_moving_camera.ipynb", {"VISJAX_NB_DURATION": "4"}, ("rank (3.20)", "toolbox K_c")),
+        ("uio_moving_camera.ipynb", {"VISJAX_NB_DURATION": "2"}, ("rank (3.20)", "toolbox K_c")),
         (
             "uncalibrated_structure.ipynb",
             {"VISJAX_NB_DURATION": "3"},

@@ -9,8 +9,9 @@ decomposition, calibration, the uncalibrated-camera model), `kinematics` (rigid-
 perspective dynamics), `sim` (general scene builders), `estimators` (the contract, the
 runner, the three papers' estimators), `baselines` (the same problems solved otherwise),
 `design` (the UIO's LMI, cvxpy imported lazily), `frontend` (KLT tracking, OpenCV imported
-lazily), `io` (each estimator's input as a documented file format), `papers` (each paper's numbers, scenario and experiment), `studies` (generic
-studies), and the modules `report`, `plots` and `cli`.
+lazily), `io` (each estimator's input as a documented file format), `papers` (each paper's
+numbers, scenario and experiment), `studies` (generic studies), and the modules `report`,
+`plots` and `cli`.
 """
 
 from . import (

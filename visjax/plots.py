@@ -67,30 +67,36 @@ def plot_velocity(ts, velocity, estimate, *, title=None, path=None, max_points=2
 
 
 def plot_structure(ts, position, estimate, *, title=None, path=None):
-    """Like Figs. 5-7 and 5-8 of seed 003: actual (dashed) and estimated (solid) position of
-    the point in the camera frame (left), and the estimation error (right), in metres."""
+    """Like Figs. 5-7 and 5-8 of Jang's thesis: actual (dashed) and estimated (solid) position
+    of the point in the camera frame (left), and the estimation error (right), in metres;
+    with `position=None` (no truth), the estimate alone."""
     plt = _pyplot(path)
 
-    ts, position, estimate = (np.asarray(x) for x in (ts, position, estimate))
-    fig, axes = plt.subplots(3, 2, figsize=(10, 7), sharex=True)
+    ts, estimate = np.asarray(ts), np.asarray(estimate)
+    truth = position is not None
+    cols = 2 if truth else 1
+    fig, axes = plt.subplots(3, cols, figsize=(10 if truth else 6, 7), sharex=True, squeeze=False)
     for i, name in enumerate("XYZ"):
-        axes[i, 0].plot(ts, position[:, i], "k--", lw=1.2, label="actual")
         axes[i, 0].plot(ts, estimate[:, i], "C0-", lw=1.0, label="estimated")
         axes[i, 0].set_ylabel(f"{name} [m]")
-        axes[i, 1].plot(ts, estimate[:, i] - position[:, i], "C3-", lw=0.8)
-        axes[i, 1].axhline(0.0, color="0.7", lw=0.5)
-        axes[i, 1].set_ylabel(f"error {name} [m]")
+        if truth:
+            position = np.asarray(position)
+            axes[i, 0].plot(ts, position[:, i], "k--", lw=1.2, label="actual")
+            axes[i, 1].plot(ts, estimate[:, i] - position[:, i], "C3-", lw=0.8)
+            axes[i, 1].axhline(0.0, color="0.7", lw=0.5)
+            axes[i, 1].set_ylabel(f"error {name} [m]")
     axes[0, 0].legend(fontsize=8)
     axes[0, 0].set_title("position of the point (camera frame)")
-    axes[0, 1].set_title("estimation error")
     axes[-1, 0].set_xlabel("time [s]")
-    axes[-1, 1].set_xlabel("time [s]")
-    # the transient of the depth dwarfs the steady state: zoom the error axes on it
-    half = ts >= ts[-1] / 2
-    for i in range(3):
-        err = estimate[half, i] - position[half, i]
-        lim = 4 * max(np.max(np.abs(err)), 1e-4)
-        axes[i, 1].set_ylim(-lim, lim)
+    if truth:
+        axes[0, 1].set_title("estimation error")
+        axes[-1, 1].set_xlabel("time [s]")
+        # the transient of the depth dwarfs the steady state: zoom the error axes on it
+        half = ts >= ts[-1] / 2
+        for i in range(3):
+            err = estimate[half, i] - position[half, i]
+            lim = 4 * max(np.nanmax(np.abs(err)), 1e-4)
+            axes[i, 1].set_ylim(-lim, lim)
     return _finish(fig, title, path)
 
 
@@ -115,10 +121,12 @@ def plot_euclidean(run, *, title=None, path=None):
     axes[1, 0].semilogy(ts, np.maximum(err, 1e-9))
     axes[1, 0].set_title("position error per feature [m]")
     axes[1, 1].semilogy(
-        ts, np.maximum(np.asarray(run.p_tilde_c).max(1), 1e-9), label="known (camera law)"
+        ts, np.maximum(np.nanmax(np.asarray(run.p_tilde_c), 1), 1e-9), label="known (camera law)"
     )
     axes[1, 1].semilogy(
-        ts, np.maximum(np.asarray(run.p_tilde_s).max(1), 1e-9), label="unknown (structure law)"
+        ts,
+        np.maximum(np.nanmax(np.asarray(run.p_tilde_s), 1), 1e-9),
+        label="unknown (structure law)",
     )
     axes[1, 1].set_title("max prediction error [px]")
     axes[1, 1].legend(fontsize=8)
@@ -126,6 +134,34 @@ def plot_euclidean(run, *, title=None, path=None):
     axes[1, 2].set_title("PE measure of eq. (49), sliding window")
     for ax in axes[1]:
         ax.set_xlabel("time [s]")
+    return _finish(fig, title, path)
+
+
+def plot_feature_estimates(ts, estimate, truth=None, *, title=None, path=None):
+    """Nath et al. on a user's data: each unknown feature's estimated world coordinates
+    (solid; the truth dashed, on top, when known) and, with the truth, the position error
+    per feature on a log axis."""
+    plt = _pyplot(path)
+    ts, est = np.asarray(ts), np.asarray(estimate)
+    n = est.shape[1]
+    rows = 2 if truth is not None else 1
+    fig, axes = plt.subplots(rows, 3, figsize=(13, 3.6 * rows), squeeze=False)
+    for c, name in enumerate("xyz"):
+        ax = axes[0, c]
+        for i in range(n):
+            ax.plot(ts, est[:, i, c], f"C{i % 10}-", lw=1.0, label=f"unknown {i + 1}")
+            if truth is not None:
+                ax.axhline(np.asarray(truth)[i, c], color=f"C{i % 10}", ls="--", lw=0.9)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(f"world {name} [m]")
+    axes[0, 0].legend(fontsize=7)
+    if truth is not None:
+        err = np.linalg.norm(est - np.asarray(truth)[None], axis=-1)
+        axes[1, 0].semilogy(ts, np.maximum(err, 1e-9))
+        axes[1, 0].set_xlabel("time [s]")
+        axes[1, 0].set_ylabel("position error [m]")
+        axes[1, 1].axis("off")
+        axes[1, 2].axis("off")
     return _finish(fig, title, path)
 
 

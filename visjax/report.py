@@ -287,6 +287,117 @@ def velocity_data_report(path, out=None, quiet: bool = False, filter_hz=None) ->
     return summary
 
 
+def structure_data_report(path, out=None, quiet: bool = False) -> dict:
+    """The unknown input observer of Jang's thesis (eq. (3.5)) on a user's data file
+    (`visjax.io.StructureData`).
+
+    The camera velocities are interpolated (linearly) to the frame times; the observer's
+    $A(u)$ is the thesis' matrix of the camera velocities (`THESIS_A_U`), and its gains
+    are designed by `visjax.design.design_uio_for_motion` for the velocity range of the
+    file (10% margin) and the measured velocities (up to the first 250 frames), with
+    $D$ the file's unknown-input direction. The design takes $\\bar f = 0$ (Lipschitz
+    bound 0): exact for a camera that translates parallel to its image plane and turns
+    about its optical axis; other motion ($v_{cz}$, $\\omega_x$, $\\omega_y$) is reported in
+    `summary.json` as `unmodelled_motion`. Dropped frames (NaN pixels) are extrapolated
+    from the last two seen. The observer runs at 1 kHz on the held frames. Writes
+    `estimate.npz` (`t`, `position`, `x_hat`), `summary.json` (with the truth,
+    `rms_last_half`, 3 floats, m, at the frame times of the second half) and
+    `structure.png`."""
+    _enable_x64()
+    from ._results import RESULTS
+    from .design import design_uio_for_motion
+    from .estimators import (
+        SaveAt,
+        UnknownInputObserver,
+        moving_camera_stream,
+        run,
+    )
+    from .io import StructureData
+    from .plots import plot_structure
+
+    data = StructureData.load(path)
+    t = np.asarray(data.t, float)
+    u = np.stack(
+        [np.interp(t, data.camera_t, data.camera_velocity[:, j]) for j in range(6)], axis=1
+    )
+    stages = _progress(3, "structure", quiet)
+    stages.set_postfix_str("design the gains (LMI)")
+    lo, hi = u.min(axis=0), u.max(axis=0)
+    mid, half_width = (lo + hi) / 2, (hi - lo) / 2
+    u_range = (mid - 1.1 * half_width, mid + 1.1 * half_width)
+    D = np.asarray(data.D, float) / np.linalg.norm(data.D)
+    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    plan = u[:250]
+    frame_dt = float(np.median(np.diff(t)))
+    design, rate = design_uio_for_motion(np.zeros((3, 3)), C, D, u_range, plan, frame_dt)
+    stages.update()
+    stages.set_postfix_str("estimate")
+    depth_guess = 1.0 if data.depth_guess is None else float(data.depth_guess)
+    observer = UnknownInputObserver(
+        A=np.zeros((3, 3)), D=D, x3_guess=1.0 / depth_guess, **design.observer_fields()
+    )
+    stream = moving_camera_stream(t, data.pixels, u, data.A, dropped="extrapolate")
+    dt = min(1e-3, frame_dt)
+    bound = float(observer.max_stable_dt(None))
+    dt = min(dt, 0.5 * bound) if np.isfinite(bound) and bound > 0 else dt
+    sol = run(observer, stream, dt=dt, saveat=SaveAt(), throw=False)
+    stages.update()
+    ok = bool(sol.result == RESULTS.successful)
+    # the estimate at each frame time: the grid point at (or just after) it
+    grid = np.asarray(sol.ts)
+    j = np.clip(np.searchsorted(grid, t - 1e-9), 0, len(grid) - 1)
+    position = np.asarray(sol.outputs.position)[j]
+    x_hat = np.asarray(sol.outputs.x_hat)[j]
+    seen = np.all(np.isfinite(np.asarray(data.pixels)), axis=1)
+    summary = {
+        "result": "successful" if ok else str(sol.result),
+        "frames": int(len(t)),
+        "dropped_frames": int(np.sum(~seen)),
+        "integration_step_s": dt,
+        "depth_guess_m": depth_guess,
+        "D": [float(x) for x in D],
+        "design": {
+            "method": "design_uio_for_motion",
+            "alpha": float(design.alpha),
+            "convergence_rate_per_s": float(rate),
+        },
+        "unmodelled_motion": float(np.max(np.abs(u[:, [2, 3, 4]]))),
+    }
+    truth = None
+    if data.position is not None:
+        truth = np.asarray(data.position)
+        summary["rms_last_half"], summary["window_s"] = _last_half_rms(t, position, truth)
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        np.savez(out / "estimate.npz", t=t, position=position, x_hat=x_hat)
+        plot_structure(
+            t,
+            truth,
+            position,
+            title=f"unknown input observer (Jang's thesis) on {Path(path).name}",
+            path=out / "structure.png",
+        )
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    stages.update()
+    stages.close()
+    print(
+        f"Unknown input observer (Jang's thesis, eq. 3.5) on {path}: {len(t)} frames, "
+        f"gains by design_uio_for_motion (rate {rate:.3g}/s); result: {summary['result']}"
+    )
+    if "rms_last_half" in summary:
+        a, b = summary["window_s"]
+        print(
+            f"RMS position error {a:g}-{b:g} s (m): "
+            + ", ".join(f"{n} {r:.4g}" for n, r in zip("XYZ", summary["rms_last_half"]))
+        )
+    if out is not None:
+        print(f"wrote {out / 'summary.json'}, {out / 'estimate.npz'} and {out / 'structure.png'}")
+    if not ok:
+        raise RuntimeError(f"the observer stopped: {sol.result} at sample {int(sol.failed_sample)}")
+    return summary
+
+
 def structure_report(
     sets=None,
     duration: float = 30.0,
@@ -346,6 +457,86 @@ def structure_report(
     if out is not None:
         (out / "summary.json").write_text(json.dumps(summary, indent=2))
         print(f"\nwrote {out / 'summary.json'} and structure_<set>.png")
+    return summary
+
+
+def euclidean_data_report(path, out=None, quiet: bool = False) -> dict:
+    """The adaptive structure estimator of Nath et al. on a user's data file
+    (`visjax.io.EuclideanData`): built from the nominal camera of the file
+    (`AdaptiveStructureEstimator.from_nominal`: initial guesses and gains from the scene's
+    scale, never from a truth), run at 1 kHz on the held samples (at the samples if they
+    are faster), features out of view (NaN) masked in both laws. Writes `estimate.npz`
+    (`t`, `features` (M, n - k, 3), the recovered camera `A`, `R_c`, `x_c` over time),
+    `summary.json` (the final features and camera; with the truth,
+    `final_position_error_m`, n - k floats) and `euclidean.png`."""
+    _enable_x64()
+    from ._results import RESULTS
+    from .estimators import AdaptiveStructureEstimator, SaveAt, platform_stream, run
+    from .io import EuclideanData
+    from .plots import plot_feature_estimates
+
+    data = EuclideanData.load(path)
+    k = data.n_known
+    pixels = np.asarray(data.pixels, float)
+    stages = _progress(2, "euclidean", quiet)
+    stages.set_postfix_str("estimate (compiles once)")
+    stream = platform_stream(
+        data.t, data.platform_R, data.platform_x, pixels[:, k:], pixels[:, :k], data.known_features
+    )
+    longest = float(np.max(np.diff(np.asarray(data.t, float))))
+    dt = None if longest <= 1e-3 else 1e-3
+    est = AdaptiveStructureEstimator.from_nominal(
+        stream, data.A_nominal, data.R_c_nominal, data.x_c_nominal, dt=dt
+    )
+    step = longest if dt is None else dt
+    every = max(1, int(round(0.01 / step)))
+    sol = run(est, stream, dt=dt, saveat=SaveAt(every=every), throw=False)
+    stages.update()
+    ok = bool(sol.result == RESULTS.successful)
+    features = np.asarray(sol.outputs.omega_s)
+    A, R_c, x_c = (np.asarray(getattr(sol.outputs, f)) for f in ("A", "R_c", "x_c"))
+    summary = {
+        "result": "successful" if ok else str(sol.result),
+        "frames": int(pixels.shape[0]),
+        "known_features": k,
+        "unknown_features": int(pixels.shape[1] - k),
+        "missing_observations": int(np.sum(~np.all(np.isfinite(pixels), axis=-1))),
+        "integration_step_s": dt,
+        "final_features_m": features[-1].tolist(),
+        "camera": {"A": A[-1].tolist(), "R_c": R_c[-1].tolist(), "x_c": x_c[-1].tolist()},
+    }
+    if data.features is not None:
+        err = np.linalg.norm(features[-1] - np.asarray(data.features), axis=-1)
+        summary["final_position_error_m"] = [float(e) for e in err]
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        np.savez(
+            out / "estimate.npz", t=np.asarray(sol.ts), features=features, A=A, R_c=R_c, x_c=x_c
+        )
+        plot_feature_estimates(
+            sol.ts,
+            features,
+            data.features,
+            title=f"adaptive structure estimator (Nath et al.) on {Path(path).name}",
+            path=out / "euclidean.png",
+        )
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    stages.update()
+    stages.close()
+    print(
+        f"Adaptive LS structure estimator (Nath et al., eqs. 37-51) on {path}: "
+        f"{summary['frames']} frames, {k} known and {summary['unknown_features']} unknown "
+        f"features; result: {summary['result']}"
+    )
+    for i, e in enumerate(summary.get("final_position_error_m", [])):
+        print(f"feature {k + i + 1}: final position error {e * 1000:8.3f} mm")
+    if out is not None:
+        print(f"wrote {out / 'summary.json'}, {out / 'estimate.npz'} and {out / 'euclidean.png'}")
+    if not ok:
+        raise RuntimeError(
+            f"the estimator stopped: {sol.result} at sample {int(sol.failed_sample)}"
+        )
     return summary
 
 

@@ -143,7 +143,7 @@ def velocity_measurements(
     (`plane_normal_from_frames`); `visible`: optional (n,) booleans, the features seen in
     this frame (the homography is fitted to these; of more than four features at least
     four must be seen; feature 1 may be among the missing: its pixel then follows from the
-    homography, $p_1 \sim G_n p_1^*$, eq. (17)); `throw` as in `euclidean_reconstruction`.
+    homography, $p_1 \\sim G_n p_1^*$, eq. (17)); `throw` as in `euclidean_reconstruction`.
 
     **Returns:** a `VelocityMeasurement`; with `throw=False` its `result` says whether the
     frame was measured (a failed frame is all NaN).

@@ -30,6 +30,7 @@ Structure (Jang's thesis, *structure of a moving point seen by a moving camera*)
 | `camera_t` | (M,) | times of the camera velocity samples, s (any rate) |
 | `camera_velocity` | (M, 6) | $[v_c, \\omega_c]$ of the camera in its own frame, m/s and rad/s |
 | `D` | (3,) | direction of the unknown input (the point's own motion), thesis eq. (3.1) |
+| `depth_guess` | () | optional: the observer's initial depth guess, m (default 1) |
 | `position` | (N, 3) | truth, optional: the point in the camera frame, m |
 
 Euclidean (Nath, Dawson, Tatlicioglu, *Euclidean position estimation of static features
@@ -205,6 +206,7 @@ class StructureData(_Format):
     camera_t: np.ndarray
     camera_velocity: np.ndarray
     D: np.ndarray
+    depth_guess: np.ndarray | None = None
     position: np.ndarray | None = None
 
     REQUIRED = ("t", "pixels", "A", "camera_t", "camera_velocity", "D")
@@ -219,9 +221,12 @@ class StructureData(_Format):
         self._shape("A", (3, 3))
         self._shape("D", (3,))
         self._shape("position", (n_t, 3))
+        self._shape("depth_guess", ())
         self._times()
         self._times("camera_t")
-        self._finite("t", "A", "camera_t", "camera_velocity", "D", "position")
+        self._finite("t", "A", "camera_t", "camera_velocity", "D", "position", "depth_guess")
+        if self.depth_guess is not None and not float(self.depth_guess) > 0:
+            raise DataFormatError(f"`depth_guess` must be positive; got {self.depth_guess}.")
         if not np.linalg.norm(self.D) > 0:
             raise DataFormatError("`D` must be a nonzero direction.")
         if not np.all(np.isfinite(np.asarray(self.pixels)[0])):

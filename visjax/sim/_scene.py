@@ -354,7 +354,9 @@ class Sampler(eqx.Module):
         """Frame times over `duration` seconds from 0 (frame 0 at exactly 0)."""
         n = int(round(duration * self.rate_hz))
         if not (duration > 0 and n >= 2):
-            raise ValueError(f"`duration` must give at least 2 frames; got {duration!r}.")
+            raise ValueError(
+                f"`duration` times `rate_hz` must give at least 2 samples; got {duration!r}."
+            )
         ts = jnp.arange(n, dtype=jnp.result_type(float)) / self.rate_hz
         if self.jitter_s > 0:
             if key is None:
