@@ -23,7 +23,7 @@ def _load():
     return module
 
 
-def _check(report, complete=True):
+def _check(report, complete=True, streams=True):
     for name, per_kind in report["functions"].items():
         for kind, counts in per_kind.items():
             assert counts["silent_nonfinite"] == 0, (name, kind, counts)
@@ -42,8 +42,9 @@ def _check(report, complete=True):
         "L_omega_inv",  # fuzzed with L_omega
     }
     assert public <= covered, public - covered
-    for builder in ("fixed_camera_stream", "moving_camera_stream", "platform_stream"):
-        assert builder in report["functions"]
+    if streams:
+        for builder in ("fixed_camera_stream", "moving_camera_stream", "platform_stream"):
+            assert builder in report["functions"]
     for name, per_kind in report["functions"].items():
         # the invalid reconstruction inputs include bad intrinsics, which the homography
         # from pixels alone rightly ignores
@@ -70,13 +71,18 @@ def test_fuzz_float64_batch_1():
 
 @pytest.mark.parametrize("seed", [11])
 def test_fuzz_float32(seed):
+    """The geometry in float32 (DESIGN.md: geometry must be usable with x64 off). The
+    stream builders are float64 estimator inputs; `python benchmarks/fuzz.py --dtype
+    float32` fuzzes them in float32 too."""
     env = {**os.environ, "JAX_ENABLE_X64": "0", "JAX_PLATFORMS": "cpu"}
+    parts = [p for p in _load().PARTS if p != "fuzz_streams"]
     done = subprocess.run(
-        [sys.executable, str(SCRIPT), "--n", "200", "--dtype", "float32", "--seed", str(seed)],
+        [sys.executable, str(SCRIPT), "--n", "200", "--dtype", "float32", "--seed", str(seed)]
+        + ["--parts", *parts],
         capture_output=True,
         text=True,
         env=env,
         timeout=600,
     )
     assert done.returncode == 0, done.stderr[-3000:]
-    _check(json.loads(done.stdout))
+    _check(json.loads(done.stdout), streams=False)

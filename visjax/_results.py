@@ -89,3 +89,15 @@ def all_finite(tree):
 def intrinsics_ok(A):
     """A usable intrinsic matrix: finite, with non-zero focal lengths (invertible, eq. (15))."""
     return jnp.all(jnp.isfinite(A)) & (A[0, 0] != 0.0) & (A[1, 1] != 0.0) & (A[2, 2] != 0.0)
+
+
+def result_names(result):
+    """The name of a `RESULTS` item (`"successful"`, `"diverged"`, ...), or a list of names
+    for a batch of them (a `vmap`ped `Solution.result`)."""
+    import numpy as np
+
+    names = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
+    values = np.asarray(result._value)
+    if values.ndim == 0:
+        return names[int(values)]
+    return [names[int(v)] for v in values.ravel()]

@@ -199,3 +199,38 @@ def plot_geometry(scenes, ours, errors, *, title=None, path=None):
     ax1.set_title("errors against ground truth")
     ax1.legend(fontsize=8)
     return _finish(fig, title, path)
+
+
+def plot_comparison(records, accuracy, *, label, title=None, path=None):
+    """`visjax compare`: per method, the accuracy of every seed (left; a dot per seed, a bar
+    at the median, flagged runs as red crosses at the top) and the latency per new sample
+    (right), both on log axes. `accuracy(record) -> float` picks the headline number."""
+    plt = _pyplot(path)
+    methods = list(dict.fromkeys(r["method"] for r in records))
+    fig, axes = plt.subplots(1, 2, figsize=(7.0, 3.0))
+    for i, method in enumerate(methods):
+        rows = [r for r in records if r["method"] == method]
+        good = [accuracy(r) for r in rows if r["result"] == "successful"]
+        good = [g for g in good if np.isfinite(g) and g > 0]
+        if good:
+            axes[0].plot([i] * len(good), good, "o", color="C0", alpha=0.6, ms=4)
+            axes[0].hlines(np.median(good), i - 0.3, i + 0.3, color="k")
+        failed = sum(r["result"] != "successful" for r in rows)
+        if failed:
+            axes[0].annotate(
+                f"{failed} failed",
+                (i, 1.0),
+                xycoords=("data", "axes fraction"),
+                ha="center",
+                va="top",
+                color="C3",
+            )
+        lat = [r["latency_s_per_sample"] for r in rows]
+        axes[1].plot([i] * len(lat), lat, "o", color="C1", alpha=0.6, ms=4)
+        axes[1].hlines(np.median(lat), i - 0.3, i + 0.3, color="k")
+    for ax, ylabel in zip(axes, (label, "latency per new sample (s)")):
+        ax.set_yscale("log")
+        ax.set_xticks(range(len(methods)), methods, rotation=20)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, axis="y", which="both", alpha=0.3)
+    return _finish(fig, title, path)

@@ -291,51 +291,29 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
     """The unknown input observer of Jang's thesis (eq. (3.5)) on a user's data file
     (`visjax.io.StructureData`).
 
-    The camera velocities are interpolated (linearly) to the frame times; the observer's
-    $A(u)$ is the thesis' matrix of the camera velocities (`THESIS_A_U`), and its gains
-    are designed by `visjax.design.design_uio_for_motion` for the velocity range of the
-    file (10% margin) and the measured velocities (up to the first 250 frames), with
-    $D$ the file's unknown-input direction. The design takes $\\bar f = 0$ (Lipschitz
-    bound 0): exact for a camera that translates parallel to its image plane and turns
-    about its optical axis; other motion ($v_{cz}$, $\\omega_x$, $\\omega_y$) is reported in
-    `summary.json` as `unmodelled_motion`. Dropped frames (NaN pixels) are extrapolated
+    The observer and its gains come from `visjax.studies.structure_observer_for_data`
+    (gains designed by `design_uio_for_motion` for the file's camera motion; motion
+    outside the design's model reported in `summary.json` as `unmodelled_motion`. Dropped frames (NaN pixels) are extrapolated
     from the last two seen. The observer runs at 1 kHz on the held frames. Writes
     `estimate.npz` (`t`, `position`, `x_hat`), `summary.json` (with the truth,
     `rms_last_half`, 3 floats, m, at the frame times of the second half) and
     `structure.png`."""
     _enable_x64()
     from ._results import RESULTS
-    from .design import design_uio_for_motion
-    from .estimators import (
-        SaveAt,
-        UnknownInputObserver,
-        moving_camera_stream,
-        run,
-    )
+    from .estimators import SaveAt, moving_camera_stream, run
     from .io import StructureData
     from .plots import plot_structure
+    from .studies import structure_observer_for_data
 
     data = StructureData.load(path)
     t = np.asarray(data.t, float)
-    u = np.stack(
-        [np.interp(t, data.camera_t, data.camera_velocity[:, j]) for j in range(6)], axis=1
-    )
     stages = _progress(3, "structure", quiet)
     stages.set_postfix_str("design the gains (LMI)")
-    lo, hi = u.min(axis=0), u.max(axis=0)
-    mid, half_width = (lo + hi) / 2, (hi - lo) / 2
-    u_range = (mid - 1.1 * half_width, mid + 1.1 * half_width)
-    D = np.asarray(data.D, float) / np.linalg.norm(data.D)
-    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    plan = u[:250]
+    observer, u, info = structure_observer_for_data(data)
+    rate = info["design"]["convergence_rate_per_s"]
     frame_dt = float(np.median(np.diff(t)))
-    design, rate = design_uio_for_motion(np.zeros((3, 3)), C, D, u_range, plan, frame_dt)
     stages.update()
     stages.set_postfix_str("estimate")
-    depth_guess = 1.0 if data.depth_guess is None else float(data.depth_guess)
-    observer = UnknownInputObserver(
-        A=np.zeros((3, 3)), D=D, x3_guess=1.0 / depth_guess, **design.observer_fields()
-    )
     stream = moving_camera_stream(t, data.pixels, u, data.A, dropped="extrapolate")
     dt = min(1e-3, frame_dt)
     bound = float(observer.max_stable_dt(None))
@@ -354,14 +332,7 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
         "frames": int(len(t)),
         "dropped_frames": int(np.sum(~seen)),
         "integration_step_s": dt,
-        "depth_guess_m": depth_guess,
-        "D": [float(x) for x in D],
-        "design": {
-            "method": "design_uio_for_motion",
-            "alpha": float(design.alpha),
-            "convergence_rate_per_s": float(rate),
-        },
-        "unmodelled_motion": float(np.max(np.abs(u[:, [2, 3, 4]]))),
+        **info,
     }
     truth = None
     if data.position is not None:

@@ -1,4 +1,11 @@
-"""Generic studies over any estimator: sweeps, gain tuning, comparisons (to come).
+"""Generic studies over any estimator or baseline: comparisons on identical inputs (sweeps
+and tuning to come).
 
 The papers' own experiments live in `visjax.papers`.
 """
+
+from ._compare import compare as compare
+from ._problems import (
+    Problem as Problem,
+    structure_observer_for_data as structure_observer_for_data,
+)

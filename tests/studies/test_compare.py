@@ -1,0 +1,68 @@
+"""`studies.compare`: every method sees the same inputs per seed; records carry the result
+code's name, timings and the scores."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+import pytest
+
+from visjax._results import RESULTS
+from visjax.studies import compare
+
+
+class Out(eqx.Module):
+    value: jax.Array
+    result: RESULTS
+
+
+def mean(x):
+    return Out(jnp.mean(x), RESULTS.successful)
+
+
+def flagged_max(x):
+    bad = jnp.max(x) > 1.5
+    return Out(jnp.max(x), RESULTS.where(bad, RESULTS.diverged, RESULTS.successful))
+
+
+def inputs(key):
+    x = jax.random.normal(key, (50,))
+    return x, jnp.mean(x)
+
+
+def score(name, sol, truth):
+    return {"error": float(sol.value - truth)}
+
+
+def test_records_same_inputs_and_result_names():
+    records = compare(
+        {"mean": mean, "max": flagged_max}, inputs, score, seeds=3, updates={"mean": 50}
+    )
+    table = pd.DataFrame(records)
+    assert len(table) == 6 and set(table["seed"]) == {0, 1, 2}
+    assert set(table.columns) >= {
+        "method",
+        "seed",
+        "result",
+        "latency_s_per_sample",
+        "total_s",
+        "compile_s",
+        "error",
+    }
+    # the mean of the same inputs as the truth: zero error on every seed
+    np.testing.assert_allclose(table[table.method == "mean"]["error"], 0.0, atol=1e-15)
+    maxima = [float(jnp.max(inputs(jax.random.key(s))[0])) for s in range(3)]
+    expected = ["diverged" if m > 1.5 else "successful" for m in maxima]
+    assert list(table[table.method == "max"]["result"]) == expected
+    assert "diverged" in expected  # the seeds include a flagged run
+    mean_rows = table[table.method == "mean"]
+    np.testing.assert_allclose(mean_rows.latency_s_per_sample * 50, mean_rows.total_s)
+    assert table.compile_s.notna().sum() == 2  # first seed only
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="seeds"):
+        compare({"mean": mean}, inputs, score, seeds=0)
+    with pytest.raises(ValueError, match="updates"):
+        compare({"mean": mean}, inputs, score, updates={"other": 3})

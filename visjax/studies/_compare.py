@@ -1,0 +1,87 @@
+"""`compare`: several methods (an estimator, its baselines) on identical inputs over noise
+seeds, with accuracy, result code and timing per run, as tidy records."""
+
+import statistics
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import equinox as eqx
+import jax
+
+from .._results import result_names
+
+
+def compare(
+    methods: Mapping[str, Callable[[Any], Any]],
+    inputs: Callable[[jax.Array], tuple[Any, Any]],
+    score: Callable[[str, Any, Any], dict],
+    *,
+    seeds: int = 4,
+    updates: Mapping[str, int] | None = None,
+    repeats: int = 3,
+    progress: bool = False,
+) -> list[dict]:
+    """Run every method on the same inputs for each noise seed and record how it did.
+
+    **Arguments:**
+
+    - `methods`: name -> `method(inputs) -> solution`, a pure function of the inputs (it is
+        compiled once with `equinox.filter_jit`, on the first seed). The solution must have a
+        `result` (a visjax `RESULTS` item).
+    - `inputs`: `key -> (inputs, truth)`, the noisy measurements of one seed (every method
+        sees the same ones) and the ground truth for `score`.
+    - `score`: `(name, solution, truth) -> dict` of accuracy numbers (JSON-able).
+    - `seeds`: noise seeds `0, ..., seeds - 1` (`jax.random.key(seed)`).
+    - `updates`: per method, how many estimate updates one call makes, for the latency:
+        the number of samples for a recursive method (an observer, a filter: constant cost
+        per new sample), the number of window fits for a sliding-window fit, 1 for a batch
+        fit over all frames (whose latency is then a whole re-fit: what a new sample costs
+        if the batch answer is to stay current). Default: 1.
+    - `repeats`: timed calls per method and seed, after the compiling one; the median is
+        reported.
+
+    **Returns:** one record per (method, seed): `method`, `seed`, `result` (the result
+    code's name), `latency_s_per_sample` (median call time / updates), `total_s` (median
+    call time), `compile_s` (the first call, compilation included: first seed only, else
+    `None`) and the keys of `score`.
+    """
+    if seeds < 1:
+        raise ValueError(f"`seeds` must be at least 1; got {seeds}.")
+    if repeats < 1:
+        raise ValueError(f"`repeats` must be at least 1; got {repeats}.")
+    updates = dict(updates or {})
+    unknown = set(updates) - set(methods)
+    if unknown:
+        raise ValueError(f"`updates` names methods not in `methods`: {sorted(unknown)}.")
+    compiled = {name: eqx.filter_jit(fn) for name, fn in methods.items()}
+    records = []
+    from tqdm import tqdm
+
+    bar = tqdm(total=seeds * len(methods), desc="compare", unit="run", disable=not progress)
+    for seed in range(seeds):
+        data, truth = inputs(jax.random.key(seed))
+        for name, fn in compiled.items():
+            t0 = time.perf_counter()
+            sol = jax.block_until_ready(fn(data))
+            first = time.perf_counter() - t0
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                jax.block_until_ready(fn(data))
+                times.append(time.perf_counter() - t0)
+            total = statistics.median(times)
+            records.append(
+                {
+                    "method": name,
+                    "seed": seed,
+                    "result": result_names(sol.result),
+                    "latency_s_per_sample": total / updates.get(name, 1),
+                    "total_s": total,
+                    "compile_s": first if seed == 0 else None,
+                    **score(name, sol, truth),
+                }
+            )
+            bar.update()
+    bar.close()
+    return records
