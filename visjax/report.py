@@ -293,11 +293,11 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
 
     The observer and its gains come from `visjax.studies.structure_observer_for_data`
     (gains designed by `design_uio_for_motion` for the file's camera motion; motion
-    outside the design's model reported in `summary.json` as `unmodelled_motion`. Dropped frames (NaN pixels) are extrapolated
-    from the last two seen. The observer runs at 1 kHz on the held frames. Writes
-    `estimate.npz` (`t`, `position`, `x_hat`), `summary.json` (with the truth,
-    `rms_last_half`, 3 floats, m, at the frame times of the second half) and
-    `structure.png`."""
+    outside the design's model reported in `summary.json` as `unmodelled_motion`).
+    Dropped frames (NaN pixels) are extrapolated from the last two seen. The observer
+    runs at 1 kHz on the held frames. Writes `estimate.npz` (`t`, `position`, `x_hat`),
+    `summary.json` (with the truth, `rms_last_half`, 3 floats, m, at the frame times of
+    the second half) and `structure.png`."""
     _enable_x64()
     from ._results import RESULTS
     from .estimators import SaveAt, moving_camera_stream, run
