@@ -92,8 +92,23 @@ def _run_euclidean(a):
     return report.euclidean_report(a.duration, a.noise_px, a.seed, out=a.out, quiet=a.quiet)
 
 
+def _run_compare(a):
+    return report.compare_report(
+        a.problem, a.data, a.noise, a.seeds, a.duration, out=a.out, quiet=a.quiet
+    )
+
+
 def _run_reproduce(a):
     return report.reproduce(a.out, quick=a.quick, quiet=a.quiet)
+
+
+_OWN_DATA = (
+    "run on your own data file (.npz, see README 'Your own data') instead of the paper's simulation"
+)
+
+
+def _add_data(parser, help: str) -> None:
+    parser.add_argument("--data", type=str, default=None, help=help)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -137,13 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     v.add_argument("--out", type=str, default=None, help="directory for summary.json and figure")
     v.add_argument("--quiet", action="store_true", help="no progress bar")
-    v.add_argument(
-        "--data",
-        type=str,
-        default=None,
-        help="run on your own data file (.npz, see README 'Your own data') instead of the "
-        "paper's simulation",
-    )
+    _add_data(v, _OWN_DATA)
     v.set_defaults(func=_run_velocity)
 
     st = sub.add_parser(
@@ -158,13 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--seed", type=_seed, default=0)
     st.add_argument("--out", type=str, default=None, help="directory for figures and summary")
     st.add_argument("--quiet", action="store_true", help="no progress bar")
-    st.add_argument(
-        "--data",
-        type=str,
-        default=None,
-        help="run on your own data file (.npz, see README 'Your own data') instead of the "
-        "paper's simulation",
-    )
+    _add_data(st, _OWN_DATA)
     st.set_defaults(func=_run_structure)
 
     eu = sub.add_parser(
@@ -176,14 +179,29 @@ def build_parser() -> argparse.ArgumentParser:
     eu.add_argument("--seed", type=_seed, default=0)
     eu.add_argument("--out", type=str, default=None, help="directory for figure and summary")
     eu.add_argument("--quiet", action="store_true", help="no progress bar")
-    eu.add_argument(
-        "--data",
-        type=str,
-        default=None,
-        help="run on your own data file (.npz, see README 'Your own data') instead of the "
-        "paper's simulation",
-    )
+    _add_data(eu, _OWN_DATA)
     eu.set_defaults(func=_run_euclidean)
+
+    c = sub.add_parser(
+        "compare",
+        help="an estimator against its batch least-squares baselines and its EKF, on "
+        "identical noisy inputs over noise seeds",
+    )
+    c.add_argument("problem", choices=("velocity", "structure", "euclidean"))
+    _add_data(c, "your own data file (.npz, see README 'Your own data'); noise is added on top")
+    c.add_argument(
+        "--noise", type=_nonnegative, default=0.1, help="pixel noise sigma in px (default 0.1)"
+    )
+    c.add_argument("--seeds", type=_count, default=4, help="noise seeds (default 4)")
+    c.add_argument(
+        "--duration",
+        type=_positive,
+        default=None,
+        help="seconds of the paper's scenario (default: the problem's; not with --data)",
+    )
+    c.add_argument("--out", type=str, default=None, help="directory for summary.json and figure")
+    c.add_argument("--quiet", action="store_true", help="no progress bar")
+    c.set_defaults(func=_run_compare)
 
     r = sub.add_parser("reproduce", help="every paper's main experiment, figures and a summary")
     r.add_argument("--quick", action="store_true", help="smaller geometry batch")
@@ -210,6 +228,8 @@ def main(argv=None) -> int:
         and args.duration * getattr(args, "rate", 1000.0) < 2
     ):
         parser.error("--duration times the rate must give at least 2 samples")
+    if args.command == "compare" and args.data is not None and args.duration is not None:
+        parser.error("--duration applies to the paper's scenario, not to --data")
     try:
         _check_out(args.out)
     except argparse.ArgumentTypeError as e:

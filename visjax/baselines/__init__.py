@@ -1,3 +1,16 @@
-"""Baselines run on the same data as the estimators (OpenCV imported lazily, inside calls)."""
+"""Baselines on the same data as the estimators: batch nonlinear least squares
+(optimistix Levenberg-Marquardt) and extended Kalman filters, returning the estimators'
+own `Output` Modules in a `Solution` (OpenCV imported lazily, inside calls)."""
 
+from ._bundle import (
+    BundleDiagnostics as BundleDiagnostics,
+    bundle_adjustment as bundle_adjustment,
+    bundle_adjustment_residuals as bundle_adjustment_residuals,
+    euclidean_ekf as euclidean_ekf,
+)
+from ._ekf import (
+    AbstractEKFModel as AbstractEKFModel,
+    EKFSolution as EKFSolution,
+    extended_kalman_filter as extended_kalman_filter,
+)
 from ._opencv import opencv_reconstruction as opencv_reconstruction

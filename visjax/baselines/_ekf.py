@@ -26,6 +26,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 
 from .._results import RESULTS, all_finite, raise_or_keep
 from .._util import as_float
+from ..estimators import Solution
 
 
 class AbstractEKFModel(eqx.Module):
@@ -187,3 +188,18 @@ def extended_kalman_filter(
     (_, _, result, failed), (xs, Ps) = jax.lax.scan(body, init, jnp.arange(n_samples))
     xs = raise_or_keep(result, xs, throw)
     return EKFSolution(ts=ts, xs=xs, Ps=Ps, result=result, failed_sample=failed)
+
+
+def baseline_solution(ts, outputs, result, failed_sample, diagnostics=None) -> Solution:
+    """A baseline's answer in the estimators' `Solution`: `outputs` per time of `ts`, the
+    result code, the failed sample (-1 if none) and the baseline's own diagnostics."""
+    return Solution(
+        ts=ts,
+        outputs=outputs,
+        diagnostics=diagnostics,
+        states=None,
+        final_state=None,
+        summary=None,
+        result=result,
+        failed_sample=jnp.asarray(failed_sample),
+    )

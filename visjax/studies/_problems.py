@@ -75,3 +75,43 @@ def structure_observer_for_data(data):
         "unmodelled_motion": float(np.max(np.abs(u[:, [2, 3, 4]]))),
     }
     return observer, u, info
+
+
+def _noisy(key, pixels, noise_px):
+    """The pixels plus i.i.d. Gaussian noise (sigma `noise_px`); NaN (not seen) stays NaN."""
+    import jax.numpy as jnp
+
+    from ..sim import add_pixel_noise
+
+    if noise_px == 0:
+        return jnp.asarray(pixels)
+    return add_pixel_noise(key, jnp.asarray(pixels), noise_px)
+
+
+def _held(sample_ts, values, t):
+    """`values` (at `sample_ts`) held at the times `t`: the last sample at or before each."""
+    k = np.searchsorted(np.asarray(sample_ts), np.asarray(t) + 1e-9, side="right") - 1
+    return np.asarray(values)[np.clip(k, 0, len(sample_ts) - 1)]
+
+
+def _last_half(t):
+    t = np.asarray(t)
+    return t >= t[0] + 0.5 * (t[-1] - t[0])
+
+
+def _ok(sol) -> bool:
+    from .._results import result_names
+
+    return result_names(sol.result) == "successful"
+
+
+def _rms_last_half(sol, field, truth_ts, truth, scale=1.0):
+    """RMS per component over the second half of the run, of `sol.outputs.<field>` (times
+    `scale`) against the truth held at the solution's times; `None` for a failed run."""
+    if truth is None or not _ok(sol):
+        return None
+    t = np.asarray(sol.ts)
+    est = np.asarray(getattr(sol.outputs, field)) * scale
+    err = est - _held(truth_ts, truth, t)
+    err = err[_last_half(t)]
+    return [float(x) for x in np.sqrt(np.mean(err.reshape(err.shape[0], -1) ** 2, axis=0))]
