@@ -14,3 +14,13 @@ from ._ekf import (
     extended_kalman_filter as extended_kalman_filter,
 )
 from ._opencv import opencv_reconstruction as opencv_reconstruction
+from ._pose_fit import (
+    FramePoses as FramePoses,
+    fit_bandwidth_hz as fit_bandwidth_hz,
+    frame_poses as frame_poses,
+    half_width_for_bandwidth as half_width_for_bandwidth,
+    object_features as object_features,
+    reprojection_residuals as reprojection_residuals,
+    velocity_ekf as velocity_ekf,
+    velocity_smoother as velocity_smoother,
+)
