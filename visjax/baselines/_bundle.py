@@ -134,9 +134,9 @@ def bundle_adjustment(
     *,
     window: int | None = None,
     every: int = 1,
-    max_steps: int = 100,
-    rtol: float = 1e-10,
-    atol: float = 1e-10,
+    max_steps: int = 256,
+    rtol: float = 1e-9,
+    atol: float = 1e-9,
     throw: bool = True,
 ) -> Solution:
     """Bundle adjustment of the camera and the unknown features, from the same stream and

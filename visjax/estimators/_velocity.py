@@ -569,7 +569,9 @@ def fixed_camera_stream(
     visible = None
     if dropouts:
         visible = jnp.all(jnp.isfinite(pixels), axis=-1)
-        if not jnp.all(jnp.isfinite(p_ref)):
+        # (checked when the pixels are concrete; under jit a non-finite reference fails
+        # the first frame instead, which must be measured)
+        if not isinstance(p_ref, jax.core.Tracer) and not jnp.all(jnp.isfinite(p_ref)):
             raise ValueError(
                 "with `dropouts=True` the reference image must show every feature: "
                 "a reference pixel is not finite."

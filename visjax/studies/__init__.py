@@ -7,5 +7,8 @@ The papers' own experiments live in `visjax.papers`.
 from ._compare import compare as compare
 from ._problems import (
     Problem as Problem,
+    euclidean_problem as euclidean_problem,
     structure_observer_for_data as structure_observer_for_data,
+    velocity_observer_bandwidth_hz as velocity_observer_bandwidth_hz,
+    velocity_problem as velocity_problem,
 )

@@ -115,3 +115,294 @@ def _rms_last_half(sol, field, truth_ts, truth, scale=1.0):
     err = est - _held(truth_ts, truth, t)
     err = err[_last_half(t)]
     return [float(x) for x in np.sqrt(np.mean(err.reshape(err.shape[0], -1) ** 2, axis=0))]
+
+
+def velocity_observer_bandwidth_hz(K) -> list[float]:
+    """The -3 dB bandwidth per degree of freedom of the linear part of the velocity
+    estimator of Chitrakaran et al. (eqs. (39)-(40) without the sign term): from $e$ to
+    $\\hat\\kappa$ per axis, $\\hat\\kappa = s\\,T(s)\\,e$ with
+    $T(s) = (k+1)(s+1)/(s^2 + (k+1)s + (k+1))$; the frequency where $|T| = 1/\\sqrt2$.
+    (The sign term $\\rho\\,\\mathrm{sgn}(\\tilde e)$ adds gain at small errors, so this is
+    the bandwidth for errors large against $\\rho/(k+1)$.)"""
+    out = []
+    w = np.geomspace(1e-4, 1e6, 400_001)
+    for k in np.asarray(K, float):
+        s = 1j * w
+        T = (k + 1) * (s + 1) / (s**2 + (k + 1) * s + (k + 1))
+        out.append(float(w[np.nonzero(np.abs(T) < 1 / np.sqrt(2))[0][0]] / (2 * np.pi)))
+    return out
+
+
+def velocity_problem(
+    *,
+    data=None,
+    noise_px: float = 0.1,
+    duration: float = 10.0,
+    rate_hz: float = 1000.0,
+    max_jerk: float | None = None,
+) -> Problem:
+    """The velocity problem of Chitrakaran et al.: the sign-based estimator (eqs. (39)-(40),
+    the gains of eq. (63) or the file's), the local least-squares fit of the pose
+    trajectory (`batch`: centred, all frames around $t$; `batch_window`: causal) at the
+    estimator's own bandwidth per degree of freedom (`velocity_observer_bandwidth_hz`),
+    and the constant-acceleration EKF (`velocity_ekf`), on the section-6 simulation
+    (`duration`, `rate_hz`) or a `VelocityData` file, with `noise_px` of Gaussian pixel
+    noise added per seed.
+
+    Stated settings: $n^*$ and $z_1^*$ are measured once from the noise-free pixels (the
+    calibration before the run; for a file, from its pixels) and shared by every method;
+    the EKF assumes the pixel noise `r_px = max(noise_px, 0.05)` and the largest jerk
+    `max_jerk` (default: 0.2 m/s^3 and rad/s^3 for the paper's scenario, whose velocity is
+    0.2 sin t; 1.0 for a file).
+    """
+    import jax.numpy as jnp
+
+    from .._results import RESULTS
+    from ..baselines import frame_poses, velocity_ekf, velocity_smoother
+    from ..estimators import VelocityEstimator, fixed_camera_stream, run
+    from ..papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
+
+    if data is None:
+        sc = section6_scenario(duration, rate_hz)
+        ts, clean, A, R_star, s1 = sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0]
+        truth, known_length, p_ref_given, K, rho = sc.velocity, None, None, K_EQ63, RHO_EQ63
+        jerk = 0.2 if max_jerk is None else max_jerk
+        source = f"section-6 simulation, {duration:g} s at {rate_hz:g} Hz"
+    else:
+        from ..io import VelocityData
+
+        d = VelocityData.load(data)
+        ts, clean, A, R_star, s1 = (
+            jnp.asarray(x, float) for x in (d.t, d.pixels, d.A, d.R_star, d.s1)
+        )
+        truth, known_length = d.velocity, d.length
+        p_ref_given = None if d.reference_pixels is None else jnp.asarray(d.reference_pixels)
+        K = K_EQ63 if d.K is None else d.K
+        rho = RHO_EQ63 if d.rho is None else d.rho
+        jerk = 1.0 if max_jerk is None else max_jerk
+        source = str(data)
+    dropouts = bool(np.any(~np.isfinite(np.asarray(clean))))
+    _, n_star, z1_star = fixed_camera_stream(
+        ts,
+        clean,
+        A,
+        R_star,
+        s1,
+        known_length=known_length,
+        reference_pixels=p_ref_given,
+        dropouts=dropouts,
+    )
+    bandwidths = velocity_observer_bandwidth_hz(K)
+    sample_interval = float(np.median(np.diff(np.asarray(ts))))
+    estimator = VelocityEstimator(K=K, rho=rho)
+    r_px = max(noise_px, 0.05)
+
+    def constants(d):
+        return (d["pixels"], A, R_star, s1, n_star, z1_star)
+
+    def estimate(d):
+        stream, _, _ = fixed_camera_stream(
+            ts,
+            d["pixels"],
+            A,
+            R_star,
+            s1,
+            n_star=n_star,
+            z1_star=z1_star,
+            reference_pixels=p_ref_given,
+            dropouts=dropouts,
+            throw=False,
+        )
+        return run(estimator, stream, throw=False)
+
+    def fit(causal):
+        def method(d):
+            args = constants(d)
+            poses = frame_poses(*args, reference_pixels=p_ref_given)
+            sols = {
+                bw: velocity_smoother(
+                    ts,
+                    *args,
+                    bandwidth_hz=bw,
+                    causal=causal,
+                    sample_interval=sample_interval,
+                    reference_pixels=p_ref_given,
+                    poses=poses,
+                    throw=False,
+                )
+                for bw in sorted(set(bandwidths))
+            }
+            # each degree of freedom from the fit at its own bandwidth
+            v_hat, v_object = (
+                jnp.stack(
+                    [getattr(sols[bw].outputs, f)[:, i] for i, bw in enumerate(bandwidths)], 1
+                )
+                for f in ("v_hat", "v_object")
+            )
+            result, failed = RESULTS.successful, jnp.array(-1)
+            for sol in sols.values():  # the first failure of any of the fits
+                fresh = (result == RESULTS.successful) & (sol.result != RESULTS.successful)
+                result = RESULTS.where(fresh, sol.result, result)
+                failed = jnp.where(fresh, sol.failed_sample, failed)
+            return _with_velocity(sols[bandwidths[0]], v_hat, v_object, result, failed)
+
+        return method
+
+    def ekf(d):
+        return velocity_ekf(
+            ts,
+            *constants(d),
+            r_px=r_px,
+            max_jerk=jerk,
+            max_angular_jerk=jerk,
+            reference_pixels=p_ref_given,
+            throw=False,
+        )
+
+    def inputs(key):
+        return {"pixels": _noisy(key, clean, noise_px)}, truth
+
+    def score(name, sol, truth):
+        return {"rms_last_half": _rms_last_half(sol, "v_hat", ts, truth)}
+
+    n = int(np.asarray(ts).shape[0])
+    return Problem(
+        name=f"velocity (Chitrakaran et al.), {source}",
+        methods={"estimator": estimate, "batch": fit(False), "batch_window": fit(True), "ekf": ekf},
+        inputs=inputs,
+        score=score,
+        updates={"estimator": n, "batch": 1, "batch_window": n, "ekf": n},
+        accuracy=lambda r: max(r["rms_last_half"]) if r["rms_last_half"] else float("nan"),
+        label="worst-axis RMS, last half (m/s, rad/s)",
+        settings={
+            "source": source,
+            "K": [float(k) for k in np.asarray(K)],
+            "rho": [float(r) for r in np.asarray(rho)],
+            "estimator_bandwidth_hz": bandwidths,
+            "fit_bandwidth_hz": bandwidths,
+            "fit_degree": 2,
+            "ekf_r_px": r_px,
+            "ekf_max_jerk": jerk,
+            "n_star": [float(x) for x in np.asarray(n_star)],
+            "z1_star": float(z1_star),
+            "constants_from": "the noise-free pixels (calibration), shared by all methods",
+            "latency": "batch: one fit over all frames per call; others: per sample",
+        },
+    )
+
+
+def _with_velocity(sol, v_hat, v_object, result, failed):
+    """`sol` with new velocity outputs, result and failed sample."""
+    import equinox as eqx
+
+    from ..estimators import VelocityOutput
+
+    out = VelocityOutput(v_hat=v_hat, v_object=v_object)
+    return eqx.tree_at(lambda s: (s.outputs, s.result, s.failed_sample), sol, (out, result, failed))
+
+
+def euclidean_problem(
+    *,
+    data=None,
+    noise_px: float = 0.1,
+    duration: float = 20.0,
+    rate_hz: float = 100.0,
+    window_s: float = 2.0,
+    every_s: float = 1.0,
+) -> Problem:
+    """The uncalibrated structure problem of Nath et al.: the adaptive least-squares
+    estimator (eqs. (37)-(51), `from_nominal`: gains from the scene's scale, initial
+    guesses from the nominal camera; integrated at 1 kHz on the held samples), bundle
+    adjustment over all frames (`batch`) and over the last `window_s` seconds every
+    `every_s` seconds (`batch_window`, causal), and the EKF (`euclidean_ekf`), all from
+    the same initial guesses, on the project's scene (`papers.nath.scenario`, `duration`
+    at `rate_hz`) or a `EuclideanData` file, with `noise_px` of pixel noise per seed. The
+    EKF assumes the pixel noise `r_px = max(noise_px, 0.05)`; its prior spreads are those
+    of `euclidean_ekf` (a nominal camera's uncertainty).
+    """
+    import jax.numpy as jnp
+
+    from ..baselines import bundle_adjustment, euclidean_ekf
+    from ..estimators import AdaptiveStructureEstimator, SaveAt, Stream, platform_stream, run
+    from ..papers import nath
+
+    if data is None:
+        sc = nath.scenario(duration, rate_hz)
+        ts, R_b, x_b, omega_c = sc.ts, sc.R_b, sc.x_b, sc.omega_c
+        clean = jnp.concatenate([sc.p_c, sc.p_s], axis=1)
+        k, truth = sc.p_c.shape[1], sc.omega_s
+        nominal = nath.nominal_camera()
+        source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz"
+    else:
+        from ..io import EuclideanData
+
+        d = EuclideanData.load(data)
+        ts, R_b, x_b, omega_c = (
+            jnp.asarray(x, float) for x in (d.t, d.platform_R, d.platform_x, d.known_features)
+        )
+        clean, k, truth = jnp.asarray(d.pixels, float), d.n_known, d.features
+        nominal = (d.A_nominal, d.R_c_nominal, d.x_c_nominal)
+        source = str(data)
+    interval = float(np.max(np.diff(np.asarray(ts))))
+    dt = None if interval <= 1e-3 else 1e-3
+    every_out = max(1, int(round(interval / (dt or interval))))
+    window = max(2, int(round(window_s / interval)))
+    every = max(1, int(round(every_s / interval)))
+    r_px = max(noise_px, 0.05)
+
+    def stream_of(pixels):
+        return platform_stream(ts, R_b, x_b, pixels[:, k:], pixels[:, :k], omega_c)
+
+    # the inputs carry the measurements; the times stay concrete (closed over), as the
+    # runner's integration grid needs them
+    def estimate(d):
+        stream = Stream(ts=ts, ys=d["ys"])
+        return run(d["estimator"], stream, dt=dt, saveat=SaveAt(every=every_out), throw=False)
+
+    def batch(d):
+        stream = Stream(ts=ts, ys=d["ys"])
+        return bundle_adjustment(d["estimator"], stream, omega_c, throw=False)
+
+    def batch_window(d):
+        stream = Stream(ts=ts, ys=d["ys"])
+        return bundle_adjustment(
+            d["estimator"], stream, omega_c, window=window, every=every, throw=False
+        )
+
+    def ekf(d):
+        stream = Stream(ts=ts, ys=d["ys"])
+        return euclidean_ekf(d["estimator"], stream, omega_c, r_px=r_px, throw=False)
+
+    def inputs(key):
+        stream = stream_of(_noisy(key, clean, noise_px))
+        estimator = AdaptiveStructureEstimator.from_nominal(stream, *nominal, dt=dt)
+        return {"ys": stream.ys, "estimator": estimator}, truth
+
+    def score(name, sol, truth):
+        if truth is None or not _ok(sol):
+            return {"final_position_error_m": None}
+        err = np.linalg.norm(np.asarray(sol.outputs.omega_s[-1]) - np.asarray(truth), axis=-1)
+        return {"final_position_error_m": [float(e) for e in err]}
+
+    n = int(np.asarray(ts).shape[0])
+    return Problem(
+        name=f"uncalibrated structure (Nath et al.), {source}",
+        methods={"estimator": estimate, "batch": batch, "batch_window": batch_window, "ekf": ekf},
+        inputs=inputs,
+        score=score,
+        updates={"estimator": n, "batch": 1, "batch_window": -(-n // every), "ekf": n},
+        accuracy=lambda r: (
+            max(r["final_position_error_m"]) if r["final_position_error_m"] else float("nan")
+        ),
+        label="worst final position error (m)",
+        settings={
+            "source": source,
+            "estimator": "from_nominal (gains from the scene's scale), 1 kHz on held samples",
+            "integration_step_s": dt,
+            "window_frames": window,
+            "window_every_frames": every,
+            "ekf_r_px": r_px,
+            "latency": "batch: one fit over all frames per call; batch_window: per fit; "
+            "others: per sample",
+        },
+    )
