@@ -14,6 +14,12 @@ from ._ekf import (
     extended_kalman_filter as extended_kalman_filter,
 )
 from ._opencv import opencv_reconstruction as opencv_reconstruction
+from ._point_fit import (
+    camera_poses as camera_poses,
+    triangulate_point as triangulate_point,
+    triangulation_residuals as triangulation_residuals,
+    uio_ekf as uio_ekf,
+)
 from ._pose_fit import (
     FramePoses as FramePoses,
     fit_bandwidth_hz as fit_bandwidth_hz,

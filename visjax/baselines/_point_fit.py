@@ -1,0 +1,291 @@
+"""Batch and filter baselines of the moving-point problem of Jang's thesis (a point seen by
+a moving camera whose velocity is measured; the unknown input observer of eq. (3.5)):
+triangulation of the point over a sliding window of past frames from the known camera
+motion, and an extended Kalman filter with an inverse-depth state. Not in the thesis: the
+answers one would otherwise compute from the same measurements.
+
+Camera motion. The camera's measured velocity $u = [v_c, \\omega]$ (camera basis) is held
+between its samples, as the observer holds it. A point with coordinates $P$ in a fixed
+frame moves in the camera frame as $\\dot m = -v_c - \\omega\\times m$ (eq. (2.11) with
+$v_p = 0$), so the camera's pose $(R, c)$ in that frame obeys $\\dot R = R[\\omega]_\\times$,
+$\\dot c = R v_c$, $m = R^T(P - c)$; over an interval $\\delta$ with a held twist it moves by
+$R_\\delta = e^{[\\omega\\delta]_\\times}$, $c_\\delta = J_l(\\omega\\delta)\\,v_c\\delta$
+($J_l$ the left Jacobian of SO(3)): exact.
+
+Triangulation. Over the frames $j$ of a window ending at frame $k$, the poses relative to
+frame $k$ follow from the held twists; the point in frame $k$'s coordinates is modelled as
+a polynomial in $\\tau = t_j - t_k$ of degree `order` (0: a static point; 1, 2: a moving
+point, the low-order trajectory of batch structure from motion of moving points, the
+thesis' chapter 2 references), and each normalised measurement $y_j$ gives the two linear
+equations $(y_{j,r} e_3 - e_r)^T m_j = 0$, $r = 1, 2$ (the collinearity of $[y_j, 1]$ and
+$m_j$, eq. (3.1)). The least-squares solution is exact for noise-free data whose point
+follows the model; the estimate at $t_k$ is $m_k = P(0)$, and $[X/Z, Y/Z, 1/Z]$ of it.
+"""
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from .._results import RESULTS, all_finite, raise_or_keep
+from ..estimators import Solution, Stream, UIOOutput
+from ..geometry import skew, so3_exp
+from ..kinematics import perspective_dynamics
+from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
+
+
+def _left_jacobian(phi):
+    """$J_l(\\phi) = I + \\frac{1 - \\cos\\theta}{\\theta^2}[\\phi]_\\times + \\frac{\\theta -
+    \\sin\\theta}{\\theta^3}[\\phi]_\\times^2$, its series below 1e-4 rad (NaN-free in value
+    and gradient)."""
+    t2 = phi @ phi
+    small = t2 < 1e-8
+    t2s = jnp.where(small, 1.0, t2)
+    t = jnp.sqrt(t2s)
+    a = jnp.where(small, 0.5 - t2 / 24.0, (1.0 - jnp.cos(t)) / t2s)
+    b = jnp.where(small, 1.0 / 6.0 - t2 / 120.0, (t - jnp.sin(t)) / (t2s * t))
+    K = skew(phi)
+    return jnp.eye(3, dtype=phi.dtype) + a * K + b * K @ K
+
+
+def camera_poses(ts: Float[ArrayLike, " N"], u: Float[ArrayLike, "N 6"]):
+    """The camera's pose at each sample in the frame of the first, from its measured
+    velocities held between samples (module docstring): `(R, c)`, (N, 3, 3) and (N, 3), with
+    $m = R^T(P - c)$ for a point at $P$."""
+    ts, u = jnp.asarray(ts), jnp.asarray(u)
+    dts = jnp.diff(ts)
+
+    def step(pose, k):
+        R, c = pose
+        phi = u[k, 3:] * dts[k]
+        R_d, c_d = so3_exp(phi), _left_jacobian(phi) @ (u[k, :3] * dts[k])
+        new = (R @ R_d, c + R @ c_d)
+        return new, new
+
+    first = (jnp.eye(3, dtype=u.dtype), jnp.zeros(3, u.dtype))
+    _, (R, c) = jax.lax.scan(step, first, jnp.arange(ts.shape[0] - 1))
+    return jnp.concatenate([first[0][None], R]), jnp.concatenate([first[1][None], c])
+
+
+def _check_stream(stream):
+    if not isinstance(stream, Stream):
+        raise ValueError(f"`stream` must be a visjax Stream; got {type(stream).__name__}.")
+    y, u = stream.ys.y, stream.ys.u
+    n = jnp.shape(stream.ts)[0]
+    if jnp.shape(y) != (n, 2) or jnp.shape(u) != (n, 6):
+        raise ValueError(
+            f"the stream must carry `y` ({n}, 2) and `u` ({n}, 6); got {jnp.shape(y)} and "
+            f"{jnp.shape(u)}."
+        )
+    return y, u
+
+
+def _output(m):
+    x_hat = jnp.stack([m[0] / m[2], m[1] / m[2], 1.0 / m[2]])
+    return UIOOutput(x_hat=x_hat, position=m)
+
+
+def triangulate_point(
+    stream: Stream,
+    *,
+    window: int,
+    order: int = 0,
+    rcond: float = 1e-9,
+    throw: bool = True,
+) -> Solution:
+    """Triangulate the point at every frame from the last `window` frames (fewer at the
+    start) and the camera velocities between them (module docstring).
+
+    **Arguments:** `stream` the observer's stream (`moving_camera_stream`: normalised
+    coordinates `y` and camera velocities `u`; a NaN frame is skipped); `window` the frames
+    per fit (static); `order` the degree of the point's trajectory over the window (0: a
+    static point); `rcond` the smallest accepted ratio of the smallest to the largest
+    eigenvalue of the normal equations (scaled to unit columns): below it the window does
+    not determine the point (no camera translation, too few frames), `RESULTS.singular`;
+    `throw` as for the estimators.
+
+    **Returns:** a `Solution` with `ts`, `outputs` a `UIOOutput` per frame (position in the
+    current camera frame, in the units of the camera velocities; NaN during the warm-up,
+    before the first window that determines the point), `result` (the first failure after
+    the warm-up: a singular window, a point behind the camera, a non-finite measurement),
+    `failed_sample`, and the code of every window as `diagnostics`. Causal: the estimate at
+    $t$ uses frames up to $t$ only. Works under `jit`, `vmap` and `grad`.
+    """
+    y, u = _check_stream(stream)
+    if not (isinstance(window, int) and window >= 2):
+        raise ValueError(f"`window` must be an int of at least 2; got {window!r}.")
+    if order not in (0, 1, 2):
+        raise ValueError(f"`order` must be 0, 1 or 2; got {order!r}.")
+    ts = jnp.asarray(stream.ts)
+    n = ts.shape[0]
+    seen = jnp.all(jnp.isfinite(y), axis=1)
+    if stream.present is not None:
+        seen = seen & jnp.asarray(stream.present)
+    bad_input = jnp.any(jnp.isinf(y), axis=1) | ~jnp.all(jnp.isfinite(u), axis=1)
+    y_clean = jnp.where(seen[:, None], y, 0.0)
+    R, c = camera_poses(ts, jnp.where(jnp.isfinite(u), u, 0.0))
+    offsets = jnp.arange(-(window - 1), 1)
+    n_par = 3 * (order + 1)
+
+    def fit(k):
+        idx = k + offsets
+        use = (idx >= 0) & seen[jnp.clip(idx, 0, n - 1)]
+        idx = jnp.clip(idx, 0, n - 1)
+        R_kj = jnp.einsum("ji,njk->nik", R[k], R[idx])  # R_k^T R_j
+        c_kj = (c[idx] - c[k][None]) @ R[k]  # R_k^T (c_j - c_k)
+        tau = ts[idx] - ts[k]
+        span = jnp.maximum(jnp.max(jnp.where(use, -tau, 0.0)), jnp.finfo(ts.dtype).tiny)
+        powers = jnp.stack([(tau / span) ** i for i in range(order + 1)], axis=1)
+
+        def rows(yj, Rj, cj, pw):
+            e = jnp.stack(
+                [yj[0] * jnp.eye(3)[2] - jnp.eye(3)[0], yj[1] * jnp.eye(3)[2] - jnp.eye(3)[1]]
+            )  # (2, 3)
+            a = e @ Rj.T  # the rows acting on P
+            return jnp.kron(pw[None, :], a), a @ cj  # (2, n_par), (2,)
+
+        M, b = jax.vmap(rows)(y_clean[idx], R_kj, c_kj, powers)
+        w = use.astype(ts.dtype)[:, None, None]
+        M = (M * w).reshape(-1, n_par)
+        b = (b * w[..., 0]).reshape(-1)
+        G = M.T @ M
+        d = jnp.sqrt(jnp.maximum(jnp.diag(G), jnp.finfo(ts.dtype).tiny))
+        Gs = G / jnp.outer(d, d)
+        ev = jnp.linalg.eigvalsh(Gs)
+        determined = ev[0] > rcond * ev[-1]
+        a = jnp.linalg.solve(Gs, (M.T @ b) / d) / d
+        m = a[:3]  # P(0): the point at t_k in frame k
+        ok = determined & (m[2] > 0.0) & all_finite(m)
+        code = RESULTS.where(
+            ~determined,
+            RESULTS.singular,
+            RESULTS.where(all_finite(m), RESULTS.behind_camera, RESULTS.nonfinite_output),
+        )
+        code = RESULTS.where(ok, RESULTS.successful, code)
+        code = RESULTS.where(bad_input[k], RESULTS.nonfinite_measurement, code)
+        return _output(m), code
+
+    outputs, codes = jax.vmap(fit)(jnp.arange(n))
+    # warm-up: until a window first determines the point (enough frames, enough camera
+    # translation) the estimate is NaN and that is not a failure; after it, a window that
+    # does not determine the point (the camera stopped translating) is one
+    undetermined = codes == RESULTS.singular
+    started = jnp.cumsum(~undetermined) > 0
+    failed_mask = (codes != RESULTS.successful) & (started | ~undetermined)
+    first = jnp.argmax(failed_mask)
+    any_failed = jnp.any(failed_mask)
+    result = RESULTS.where(
+        any_failed, jax.tree_util.tree_map(lambda x: x[first], codes), RESULTS.successful
+    )
+    failed = jnp.where(any_failed, first, -1)
+    outputs = jax.tree_util.tree_map(
+        lambda v: jnp.where(started.reshape((-1,) + (1,) * (v.ndim - 1)), v, jnp.nan), outputs
+    )
+    outputs = raise_or_keep(result, outputs, throw)
+    return baseline_solution(ts, outputs, result, failed, codes)
+
+
+def triangulation_residuals(
+    position: Float[ArrayLike, "3"], stream: Stream, k: int, window: int
+) -> Float[Array, "W 2"]:
+    """The reprojection residuals (normalised coordinates, measured minus predicted) of a
+    static point at `position` (frame `k`'s coordinates) over the `window` frames up to
+    `k`: the loss a static-point triangulation minimises. Differentiable in the position
+    and in the stream's measurements."""
+    y, u = _check_stream(stream)
+    R, c = camera_poses(stream.ts, u)
+    idx = jnp.arange(k - window + 1, k + 1)
+    R_kj = jnp.einsum("ji,njk->nik", R[k], R[idx])  # R_k^T R_j
+    c_kj = (c[idx] - c[k][None]) @ R[k]  # R_k^T (c_j - c_k)
+    m = jnp.einsum("nji,nj->ni", R_kj, jnp.asarray(position)[None] - c_kj)  # R_kj^T (P - c)
+    return y[idx] - m[:, :2] / m[:, 2:]
+
+
+class _InverseDepth(AbstractEKFModel):
+    """State $[x_1, x_2, x_3, v_{px}, v_{py}, v_{pz}]$: the observer's own coordinates
+    (eq. (3.1)) and the point's velocity (camera basis, a random walk); prediction by a
+    fourth-order Runge-Kutta step of eq. (2.11) under the held camera velocity; measurement
+    $y = [x_1, x_2]$."""
+
+    q_velocity: Array
+    r_norm: Array
+
+    def transition(self, x, u, dt):
+        def f(z):
+            return jnp.concatenate([perspective_dynamics(z[:3], u, z[3:]), jnp.zeros(3, z.dtype)])
+
+        k1 = f(x)
+        k2 = f(x + 0.5 * dt * k1)
+        k3 = f(x + 0.5 * dt * k2)
+        k4 = f(x + dt * k3)
+        return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    def process_noise(self, x, u, dt):
+        q = jnp.concatenate([jnp.zeros(3, x.dtype), jnp.full(3, self.q_velocity)])
+        return jnp.diag(q * dt)
+
+    def measure(self, x, u):
+        return x[:2]
+
+    def measurement_noise(self, x, u):
+        return self.r_norm**2 * jnp.eye(2, dtype=x.dtype)
+
+    def valid(self, x, u):
+        return x[2] > 0.0
+
+
+def uio_ekf(
+    stream: Stream,
+    *,
+    r_norm: float,
+    depth0: float,
+    sigma_depth0: float,
+    q_velocity: float,
+    sigma_velocity0: float = 0.0,
+    substeps: int = 1,
+    throw: bool = True,
+) -> Solution:
+    """An extended Kalman filter of the point's inverse-depth coordinates and velocity (the
+    filter one would otherwise write for the problem of Jang's thesis; not in the thesis).
+
+    State: $x = [X/Z, Y/Z, 1/Z]$ (the UIO's coordinates, eq. (3.1)) and the point's own
+    velocity $v_p$ (camera basis; the thesis' unknown input, here a random walk of
+    intensity `q_velocity`, units^2/s^3); prediction: eq. (2.11) integrated by RK4 in
+    `substeps` steps per sample interval under the held camera velocity; update: the
+    measured $y$ (a NaN frame skipped). Noise settings (the documented rule): `r_norm` the
+    pixel noise divided by the focal length; the prior from the first measurement and the
+    same depth guess as the observer (`depth0`, with `sigma_depth0`), $v_p = 0$ with
+    `sigma_velocity0` (0: a static point expected); `q_velocity` from the expected change of
+    the point's velocity (its largest acceleration squared times the sample interval).
+
+    **Returns:** a `Solution` with `outputs` a `UIOOutput` per frame (after its update),
+    `result` (`diverged`: the inverse depth not positive; `nonfinite_measurement`;
+    `nonfinite_state`), `failed_sample`, the covariances as `diagnostics`.
+    """
+    y, u = _check_stream(stream)
+    ts = jnp.asarray(stream.ts)
+    dtype = ts.dtype
+    y0 = jnp.where(jnp.isfinite(y[0]), y[0], 0.0)
+    x0 = jnp.concatenate([y0, jnp.array([1.0 / depth0], dtype), jnp.zeros(3, dtype)])
+    sd = jnp.array([r_norm, r_norm, sigma_depth0 / depth0**2] + [sigma_velocity0] * 3, dtype)
+    model = _InverseDepth(
+        q_velocity=jnp.asarray(q_velocity, dtype), r_norm=jnp.asarray(r_norm, dtype)
+    )
+    sol = extended_kalman_filter(
+        model,
+        ts,
+        y,
+        u,
+        x0,
+        jnp.diag(sd**2) + 1e-18 * jnp.eye(6, dtype=dtype),
+        present=stream.present,
+        substeps=substeps,
+        throw=False,
+    )
+    bad_u = ~jnp.all(jnp.isfinite(u), axis=1)
+    first_bad = jnp.argmax(bad_u)
+    earlier = jnp.any(bad_u) & ((sol.failed_sample < 0) | (first_bad <= sol.failed_sample))
+    result = RESULTS.where(earlier, RESULTS.nonfinite_measurement, sol.result)
+    failed = jnp.where(earlier, first_bad, sol.failed_sample)
+    outputs = jax.vmap(lambda x: _output(jnp.stack([x[0], x[1], 1.0]) / x[2]))(sol.xs)
+    outputs = raise_or_keep(result, outputs, throw)
+    return baseline_solution(ts, outputs, result, failed, sol.Ps)
