@@ -105,10 +105,11 @@ def triangulate_point(
 
     **Returns:** a `Solution` with `ts`, `outputs` a `UIOOutput` per frame (position in the
     current camera frame, in the units of the camera velocities; NaN during the warm-up,
-    before the first window that determines the point), `result` (the first failure after
-    the warm-up: a singular window, a point behind the camera, a non-finite measurement),
-    `failed_sample`, and the code of every window as `diagnostics`. Causal: the estimate at
-    $t$ uses frames up to $t$ only. Works under `jit`, `vmap` and `grad`.
+    before the first window that determines a point in front of the camera), `result`
+    (the first failure after the warm-up: a singular window, a point behind the camera, a
+    non-finite measurement), `failed_sample`, and the code of every window as
+    `diagnostics`. Causal: the estimate at $t$ uses frames up to $t$ only. Works under
+    `jit`, `vmap` and `grad`.
     """
     y, u = _check_stream(stream)
     if not (isinstance(window, int) and window >= 2):
@@ -165,12 +166,14 @@ def triangulate_point(
         return _output(m), code
 
     outputs, codes = jax.vmap(fit)(jnp.arange(n))
-    # warm-up: until a window first determines the point (enough frames, enough camera
-    # translation) the estimate is NaN and that is not a failure; after it, a window that
-    # does not determine the point (the camera stopped translating) is one
-    undetermined = codes == RESULTS.singular
-    started = jnp.cumsum(~undetermined) > 0
-    failed_mask = (codes != RESULTS.successful) & (started | ~undetermined)
+    # warm-up: until a window first gives a point (enough frames and camera translation
+    # to determine it, in front of the camera) the estimate is NaN and that is not a
+    # failure; after it, a window that does not (the camera stopped translating) is one,
+    # and a non-finite measurement always is
+    started = jnp.cumsum(codes == RESULTS.successful) > 0
+    failed_mask = (codes != RESULTS.successful) & (
+        started | (codes == RESULTS.nonfinite_measurement)
+    )
     first = jnp.argmax(failed_mask)
     any_failed = jnp.any(failed_mask)
     result = RESULTS.where(

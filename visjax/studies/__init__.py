@@ -9,6 +9,7 @@ from ._problems import (
     Problem as Problem,
     euclidean_problem as euclidean_problem,
     structure_observer_for_data as structure_observer_for_data,
+    structure_problem as structure_problem,
     velocity_observer_bandwidth_hz as velocity_observer_bandwidth_hz,
     velocity_problem as velocity_problem,
 )
