@@ -13,11 +13,16 @@ def tree_allclose(a, b, *, rtol=1e-12, atol=0.0) -> bool:
     return all(np.allclose(x, y, rtol=rtol, atol=atol, equal_nan=False) for x, y in zip(la, lb))
 
 
+_BATCHED: dict = {}
+
+
 def central_difference(f, x, h):
     """Central finite-difference Jacobian of `f` at `x`, all perturbations in one vmapped call."""
     x = np.asarray(x, dtype=np.float64)
     E = np.eye(x.size).reshape((x.size,) + x.shape) * h
-    fb = jax.jit(jax.vmap(f))
+    fb = _BATCHED.get(f)
+    if fb is None:  # compiled once per function (and shape), not once per call
+        fb = _BATCHED[f] = jax.jit(jax.vmap(f))
     d = (np.asarray(fb(x + E)) - np.asarray(fb(x - E))) / (2 * h)  # (x.size, *out)
     return np.moveaxis(d, 0, -1).reshape(d.shape[1:] + x.shape)
 

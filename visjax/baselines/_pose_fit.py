@@ -11,7 +11,9 @@ with $d^* = z_1^* n^{*T}A^{-1}p_1^*$, and $s_i = R^{*T}(\\bar m_i^* - x_f^*)$ wi
 $x_f^* = \\bar m_1^* - R^* s_1$); in frame $t$ a feature is at $\\bar m_i = x_f + R s_i$
 (eq. (5)) and its pixel at $p_i = A\\bar m_i / z_i$ (eq. (15)). The homography gives
 $R = \\bar R R^*$ (eq. (8)) and $x_f = d^*\\bar x_h + \\bar R x_f^*$ (eqs. (12)-(13)); a
-Levenberg-Marquardt fit of the reprojection error (`optimistix.least_squares`) refines them.
+Gauss-Newton fit of the reprojection error (`optimistix.least_squares`; started this close,
+it converges in a few steps where Levenberg-Marquardt's damping stalled on some frames)
+refines them.
 The velocity is $[v_e, \\omega_e]$ in the camera frame, $v_e = \\dot x_f$ and
 $[\\omega_e]_\\times = \\dot R R^T$, the quantity of the paper's eqs. (29)-(31).
 """
@@ -85,10 +87,10 @@ def frame_poses(
     *,
     reference_pixels: Float[ArrayLike, "n 2"] | None = None,
     refine: bool = True,
-    max_steps: int = 256,
+    max_steps: int = 1000,
 ) -> FramePoses:
     """The object's pose in every frame from the homography (Chitrakaran et al., eqs.
-    (8)-(17), the known-normal path), refined by Levenberg-Marquardt on the reprojection
+    (8)-(17), the known-normal path), refined by Gauss-Newton on the reprojection
     error in pixels (rotation as a rotation vector about the homography's estimate); a NaN
     pixel is a feature not seen in that frame (at least four must be). Vmapped over
     frames; a frame that cannot be measured has its `result` and NaN pose."""
@@ -97,10 +99,13 @@ def frame_poses(
     )
     s, x_f_star = object_features(p_ref, A, R_star, s1, n_star, z1_star)
     d_star = z1_star * (n_star @ jnp.linalg.solve(A, jnp.append(p_ref[0], 1.0)))
-    solver = optx.LevenbergMarquardt(rtol=1e-9, atol=1e-9)
+    solver = optx.GaussNewton(rtol=1e-9, atol=1e-9)
 
     def one(p):
-        seen = jnp.all(jnp.isfinite(p), axis=-1)
+        # NaN: a feature not seen; inf: a bad measurement (the frame's result says so)
+        seen = ~jnp.any(jnp.isnan(p), axis=-1)
+        bad_pixel = jnp.any(jnp.isinf(p))
+        p = jnp.where(jnp.isinf(p), jnp.nan, p)
         rec = euclidean_reconstruction(p_ref, p, A, n_star=n_star, visible=seen, throw=False)
         ok = rec.result == RESULTS.successful
         R_bar = jnp.where(ok, rec.R_bar, jnp.eye(3, dtype=A.dtype))
@@ -122,6 +127,7 @@ def frame_poses(
         r = residuals(y, None)
         rms = jnp.sqrt(jnp.sum(r**2) / (2.0 * jnp.maximum(jnp.sum(seen), 1).astype(r.dtype)))
         result = RESULTS.where(ok, code, rec.result)
+        result = RESULTS.where(bad_pixel, RESULTS.nonfinite_measurement, result)
         result = RESULTS.where(
             (result == RESULTS.successful) & ~all_finite((R, x_f)), RESULTS.nonfinite_output, result
         )
