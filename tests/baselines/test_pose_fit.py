@@ -133,14 +133,11 @@ def test_vmap_over_noise_seeds_flags_the_bad_seed(constant):
     pixels = jax.vmap(lambda k: args[0][:n] + 0.2 * jax.random.normal(k, (n, 4, 2)))(keys)
     pixels = pixels.at[2, 150, 1, 0].set(jnp.inf)
 
-    def both(p):
-        a = (p,) + args[1:]
-        s = velocity_smoother(ts, *a, **fit, throw=False)
-        e = velocity_ekf(ts, *a, r_px=0.2, throw=False)
-        return s, e
+    def both(p):  # (the EKF core's own test covers a filter under vmap)
+        return velocity_smoother(ts, p, *args[1:], **fit, throw=False)
 
-    s, e = eqx.filter_jit(jax.vmap(both))(pixels)
-    for sol in (s, e):
+    s = eqx.filter_jit(jax.vmap(both))(pixels)
+    for sol in (s,):
         codes = np.asarray(sol.result._value)
         assert codes[0] == codes[1] == RESULTS.successful._value
         assert codes[2] == RESULTS.nonfinite_measurement._value

@@ -66,7 +66,7 @@ def test_reduction_oracle_without_unknown_input():
 
 def test_vmap_over_seeds_and_sets_and_grad():
     names = ["II.1", "II.2"]
-    scs = [moving_camera_scenario(n, 2.0) for n in names]
+    scs = [moving_camera_scenario(n, 1.0) for n in names]
     streams = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *[s.held_stream() for s in scs])
     observers = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *[observer_for(n) for n in names])
     both = jax.vmap(lambda o, st: run(o, st, saveat=SaveAt(every=100)).outputs.x_hat)(
@@ -78,7 +78,7 @@ def test_vmap_over_seeds_and_sets_and_grad():
 
     # noise seeds: scenario and run under vmap
     def final_error(key):
-        sc = moving_camera_scenario("I.1", 2.0, noise_px=0.5, key=key)
+        sc = moving_camera_scenario("I.1", 1.0, noise_px=0.5, key=key)
         out = run(observer_for("I.1"), sc.held_stream(), saveat=SaveAt(every=100))
         return out.outputs.x_hat[-1] - sc.x[-1]
 

@@ -15,8 +15,12 @@ $R_\\delta = e^{[\\omega\\delta]_\\times}$, $c_\\delta = J_l(\\omega\\delta)\\,v
 Triangulation. Over the frames $j$ of a window ending at frame $k$, the poses relative to
 frame $k$ follow from the held twists; the point in frame $k$'s coordinates is modelled as
 a polynomial in $\\tau = t_j - t_k$ of degree `order` (0: a static point; 1, 2: a moving
-point, the low-order trajectory of batch structure from motion of moving points, the
-thesis' chapter 2 references), and each normalised measurement $y_j$ gives the two linear
+point, as in the batch reconstructions of moving points the thesis cites in its
+introduction: Avidan and Shashua, "Trajectory triangulation: 3D reconstruction of moving
+points from a monocular image sequence" (its ref. [1]; a point on a line at constant
+speed), and Park, Shiratori, Matthews and Sheikh, "3D reconstruction of a moving point
+from a series of 2D projections" (its ref. [6]; a trajectory in a basis of time
+functions)), and each normalised measurement $y_j$ gives the two linear
 equations $(y_{j,r} e_3 - e_r)^T m_j = 0$, $r = 1, 2$ (the collinearity of $[y_j, 1]$ and
 $m_j$, eq. (3.1)). The least-squares solution is exact for noise-free data whose point
 follows the model; the estimate at $t_k$ is $m_k = P(0)$, and $[X/Z, Y/Z, 1/Z]$ of it.
