@@ -66,3 +66,49 @@ def test_bad_arguments():
         compare({"mean": mean}, inputs, score, seeds=0)
     with pytest.raises(ValueError, match="updates"):
         compare({"mean": mean}, inputs, score, updates={"other": 3})
+
+
+def test_velocity_and_euclidean_problems_on_data_files(tmp_path):
+    """The two other problems of `visjax compare`, from data files (noise on top of the
+    file's pixels): every method succeeds and scores with the estimator's own keys."""
+    import jax.numpy as jnp
+
+    from visjax.io import EuclideanData, VelocityData
+    from visjax.papers import chitrakaran, nath
+    from visjax.studies import euclidean_problem, velocity_problem
+
+    sc = nath.scenario(2.0, 20.0)
+    A0, R0, x0 = nath.nominal_camera()
+    path = tmp_path / "euclidean.npz"
+    EuclideanData(
+        t=np.asarray(sc.ts),
+        pixels=np.asarray(jnp.concatenate([sc.p_c, sc.p_s], 1)),
+        platform_R=np.asarray(sc.R_b),
+        platform_x=np.asarray(sc.x_b),
+        known_features=np.asarray(sc.omega_c),
+        A_nominal=np.asarray(A0),
+        R_c_nominal=np.asarray(R0),
+        x_c_nominal=np.asarray(x0),
+        features=np.asarray(sc.omega_s),
+    ).save(path)
+    v = chitrakaran.section6_scenario(0.3, 1000.0)
+    vpath = tmp_path / "velocity.npz"
+    VelocityData(
+        t=np.asarray(v.ts),
+        pixels=np.asarray(v.pixels),
+        A=np.asarray(v.A),
+        R_star=np.asarray(v.R_star),
+        s1=np.asarray(v.s[0]),
+        known_length=np.array([0.0, 1.0, float(np.linalg.norm(v.s[1] - v.s[0]))]),
+        velocity=np.asarray(v.velocity),
+    ).save(vpath)
+    for factory, file, key in (
+        (euclidean_problem, path, "final_position_error_m"),
+        (velocity_problem, vpath, "rms_last_half"),
+    ):
+        p = factory(data=file, noise_px=0.1)
+        records = compare(p.methods, p.inputs, p.score, seeds=1, updates=p.updates, repeats=1)
+        assert [r["method"] for r in records] == ["estimator", "batch", "batch_window", "ekf"]
+        assert all(r["result"] == "successful" for r in records), records
+        assert all(np.all(np.isfinite(r[key])) for r in records)
+        assert p.settings["source"] == str(file)

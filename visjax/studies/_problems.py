@@ -295,10 +295,11 @@ def _with_velocity(sol, v_hat, v_object, result, failed):
     """`sol` with new velocity outputs, result and failed sample."""
     import equinox as eqx
 
-    from ..estimators import VelocityOutput
-
-    out = VelocityOutput(v_hat=v_hat, v_object=v_object)
-    return eqx.tree_at(lambda s: (s.outputs, s.result, s.failed_sample), sol, (out, result, failed))
+    return eqx.tree_at(
+        lambda s: (s.outputs.v_hat, s.outputs.v_object, s.result, s.failed_sample),
+        sol,
+        (v_hat, v_object, result, failed),
+    )
 
 
 def euclidean_problem(
