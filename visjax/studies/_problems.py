@@ -133,6 +133,68 @@ def velocity_observer_bandwidth_hz(K) -> list[float]:
     return out
 
 
+@dataclass(frozen=True)
+class VelocitySource:
+    """The inputs of the velocity problem: times, noise-free pixels, camera, reference
+    gains, the once-measured $n^*$ and $z_1^*$, and where they came from."""
+
+    ts: Any
+    clean: Any
+    A: Any
+    R_star: Any
+    s1: Any
+    truth: Any
+    K: Any
+    rho: Any
+    reference_pixels: Any
+    dropouts: bool
+    n_star: Any
+    z1_star: Any
+    source: str
+
+
+def velocity_source(data, duration: float, rate_hz: float) -> VelocitySource:
+    """The section-6 simulation of Chitrakaran et al. (`duration` at `rate_hz`) with the
+    gains of eq. (63), or a `VelocityData` file with its gains (eq. (63) if none); $n^*$
+    and $z_1^*$ measured once from the noise-free pixels (the calibration before a run)."""
+    import jax.numpy as jnp
+
+    from ..estimators import fixed_camera_stream
+    from ..papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
+
+    if data is None:
+        sc = section6_scenario(duration, rate_hz)
+        ts, clean, A, R_star, s1 = sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0]
+        truth, known_length, p_ref, K, rho = sc.velocity, None, None, K_EQ63, RHO_EQ63
+        source = f"section-6 simulation, {duration:g} s at {rate_hz:g} Hz"
+    else:
+        from ..io import VelocityData
+
+        d = VelocityData.load(data)
+        ts, clean, A, R_star, s1 = (
+            jnp.asarray(x, float) for x in (d.t, d.pixels, d.A, d.R_star, d.s1)
+        )
+        truth, known_length = d.velocity, d.length
+        p_ref = None if d.reference_pixels is None else jnp.asarray(d.reference_pixels)
+        K = K_EQ63 if d.K is None else d.K
+        rho = RHO_EQ63 if d.rho is None else d.rho
+        source = str(data)
+    dropouts = bool(np.any(~np.isfinite(np.asarray(clean))))
+    _, n_star, z1_star = fixed_camera_stream(
+        ts,
+        clean,
+        A,
+        R_star,
+        s1,
+        known_length=known_length,
+        reference_pixels=p_ref,
+        dropouts=dropouts,
+    )
+    return VelocitySource(
+        ts, clean, A, R_star, s1, truth, K, rho, p_ref, dropouts, n_star, z1_star, source
+    )
+
+
 def velocity_problem(
     *,
     data=None,
@@ -160,38 +222,12 @@ def velocity_problem(
     from .._results import RESULTS
     from ..baselines import frame_poses, velocity_ekf, velocity_smoother
     from ..estimators import VelocityEstimator, fixed_camera_stream, run
-    from ..papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
 
-    if data is None:
-        sc = section6_scenario(duration, rate_hz)
-        ts, clean, A, R_star, s1 = sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0]
-        truth, known_length, p_ref_given, K, rho = sc.velocity, None, None, K_EQ63, RHO_EQ63
-        jerk = 0.2 if max_jerk is None else max_jerk
-        source = f"section-6 simulation, {duration:g} s at {rate_hz:g} Hz"
-    else:
-        from ..io import VelocityData
-
-        d = VelocityData.load(data)
-        ts, clean, A, R_star, s1 = (
-            jnp.asarray(x, float) for x in (d.t, d.pixels, d.A, d.R_star, d.s1)
-        )
-        truth, known_length = d.velocity, d.length
-        p_ref_given = None if d.reference_pixels is None else jnp.asarray(d.reference_pixels)
-        K = K_EQ63 if d.K is None else d.K
-        rho = RHO_EQ63 if d.rho is None else d.rho
-        jerk = 1.0 if max_jerk is None else max_jerk
-        source = str(data)
-    dropouts = bool(np.any(~np.isfinite(np.asarray(clean))))
-    _, n_star, z1_star = fixed_camera_stream(
-        ts,
-        clean,
-        A,
-        R_star,
-        s1,
-        known_length=known_length,
-        reference_pixels=p_ref_given,
-        dropouts=dropouts,
-    )
+    v = velocity_source(data, duration, rate_hz)
+    ts, clean, A, R_star, s1, truth = v.ts, v.clean, v.A, v.R_star, v.s1, v.truth
+    p_ref_given, K, rho, dropouts = v.reference_pixels, v.K, v.rho, v.dropouts
+    n_star, z1_star, source = v.n_star, v.z1_star, v.source
+    jerk = (0.2 if data is None else 1.0) if max_jerk is None else max_jerk
     bandwidths = velocity_observer_bandwidth_hz(K)
     sample_interval = float(np.median(np.diff(np.asarray(ts))))
     estimator = VelocityEstimator(K=K, rho=rho)

@@ -1,0 +1,244 @@
+"""`studies.sweep`, `best`, `summarise`, `save_table` and the grid helpers; `tune` and its
+gradients on the velocity estimator of Chitrakaran et al.; sharding over a mesh of four
+host devices and over two `jax.distributed` processes (subprocesses)."""
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pandas as pd
+import pytest
+
+from visjax import studies
+from visjax._results import RESULTS
+
+
+class Out(eqx.Module):
+    value: jax.Array
+    result: RESULTS
+    failed_sample: jax.Array
+
+
+def toy(params, key):
+    """value = a + noise; a > 5 'diverges' at sample 3; a == 4 gives a NaN 'success'."""
+    x = params["a"] + 0.1 * jax.random.normal(key, (3,), dtype=jnp.float64)
+    x = jnp.where(params["a"] == 4.0, jnp.nan, x)
+    bad = params["a"] > 5.0
+    return Out(x, RESULTS.where(bad, RESULTS.diverged, RESULTS.successful), jnp.where(bad, 3, -1))
+
+
+def toy_metrics(sol):
+    return {"m": jnp.mean(sol.value), "v": sol.value}
+
+
+def test_grid_helpers():
+    np.testing.assert_allclose(studies.log_axis(1e-2, 1e1, 4), [1e-2, 1e-1, 1.0, 1e1])
+    g = studies.grid(a=[1, 2], b=[3, 4, 5])
+    np.testing.assert_array_equal(g["a"], [1, 1, 1, 2, 2, 2])
+    np.testing.assert_array_equal(g["b"], [3, 4, 5, 3, 4, 5])
+    p = studies.parse_grid("K=1e-2:1e1:4, rho=0.1/1")
+    assert len(p["K"]) == 8
+    np.testing.assert_allclose(sorted(set(p["K"])), [1e-2, 1e-1, 1.0, 1e1])
+    np.testing.assert_allclose(sorted(set(p["rho"])), [0.1, 1.0])
+    r = studies.random_points(jax.random.key(0), 200, K=(1e-2, 1e2))
+    assert np.all((r["K"] >= 1e-2) & (r["K"] <= 1e2))
+    # log-uniform: a quarter of the decades below 1e-1 holds about a quarter of the points
+    assert 0.15 < np.mean(r["K"] < 1e-1) < 0.35
+    for bad in ("K", "K=1:2", "K=1e-2:1e1:x", "K=1,K=2"):
+        with pytest.raises(ValueError):
+            studies.parse_grid(bad)
+    with pytest.raises(ValueError, match="positive"):
+        studies.log_axis(0.0, 1.0, 3)
+
+
+def test_table_rows_flags_and_summary(tmp_path):
+    table = studies.sweep(
+        toy, studies.grid(a=[1.0, 2.0, 4.0, 6.0]), jnp.arange(3), metrics=toy_metrics, chunk=5
+    )
+    assert len(table) == 12 and list(table["seed"][:4]) == [0, 1, 2, 0]
+    assert list(table.columns[:4]) == ["run", "point", "a", "seed"]
+    assert {"result", "failed_sample", "m", "v[0]", "v[2]"} <= set(table.columns)
+    # each row is the unbatched run of its point and seed
+    for _, row in table.iterrows():
+        sol = toy({"a": jnp.asarray(row["a"])}, jax.random.key(int(row["seed"])))
+        if row["result"] == "successful":
+            np.testing.assert_allclose(row["v[1]"], sol.value[1], rtol=0, atol=1e-15)
+    # a diverging point: its code, its sample, NaN metrics (never the frozen numbers)
+    div = table[table["a"] == 6.0]
+    assert set(div["result"]) == {"diverged"} and set(div["failed_sample"]) == {3}
+    assert div["m"].isna().all()
+    # a NaN metric under a 'successful' code is reported as such
+    assert set(table[table["a"] == 4.0]["result"]) == {"nonfinite_output"}
+    s = studies.summarise(table, "m")
+    assert list(s["n_failed"]) == [0, 0, 3, 3]
+    np.testing.assert_allclose(s["m_mean"][:2], table.groupby("point")["m"].mean()[:2])
+    b = studies.best(table, "m")
+    assert b["params"] == {"a": 1.0} and b["point"] == 0
+    paths = studies.save_table(table, tmp_path / "out")
+    back = pd.read_parquet(paths["parquet"])
+    pd.testing.assert_frame_equal(back, table)
+    csv = pd.read_csv(paths["csv"])
+    np.testing.assert_allclose(csv["m"], table["m"], rtol=1e-15)
+    with pytest.raises(ValueError, match="every parameter point"):
+        studies.best(table[table["a"] > 3.0], "m")
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="leading axis"):
+        studies.sweep(toy, {"a": jnp.ones(3), "b": jnp.ones(2)}, jnp.arange(2), metrics=toy_metrics)
+    with pytest.raises(ValueError, match="seeds"):
+        studies.sweep(toy, {"a": jnp.ones(3)}, jnp.ones(2), metrics=toy_metrics)
+    with pytest.raises(ValueError, match="chunk"):
+        studies.sweep(toy, {"a": jnp.ones(3)}, jnp.arange(2), metrics=toy_metrics, chunk=0)
+
+
+# The velocity estimator, 2 s of the section-6 simulation at 1 kHz, 0.1 px noise: one
+# problem (one noise-free calibration) for the module.
+
+
+@pytest.fixture(scope="module")
+def velocity():
+    return studies.velocity_tuning(noise_px=0.1, duration=2.0)
+
+
+def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
+    params = {"K": jnp.array([0.01, 1.0, 10.0]), "rho": jnp.array([0.1, 1.0, 1.0])}
+    table = studies.sweep(velocity.factory, params, jnp.arange(2), metrics=velocity.metrics)
+    one = eqx.filter_jit(lambda p, k: velocity.metrics(velocity.factory(p, k)))
+    for _, row in table[table["point"] < 2].iterrows():
+        p = {"K": jnp.asarray(row["K"]), "rho": jnp.asarray(row["rho"])}
+        m = one(p, jax.random.key(int(row["seed"])))
+        np.testing.assert_allclose(
+            row[[f"rms[{i}]" for i in range(6)]].to_numpy(float), m["rms"], rtol=1e-12, atol=0
+        )
+    # K x 10: (K + 1) dt = 3 > 2, past Euler's stability bound: a flagged row, no numbers
+    bad = table[table["K"] == 10.0]
+    assert set(bad["result"]) == {"unstable_step"} and bad["rms_worst"].isna().all()
+    ok = table[table["K"] < 10.0]
+    assert (ok["result"] == "successful").all() and np.isfinite(ok["rms_worst"]).all()
+
+
+def test_tune_lowers_velocity_loss_tenfold_and_gradients(velocity):
+    keys = jnp.arange(2)
+    r = studies.tune(
+        velocity.factory, velocity.paper, velocity.loss, keys, steps=20, optimiser=optax.adam(0.3)
+    )
+    assert r.loss0 > 1.0  # the paper's gains at 0.1 px (a metre per second)
+    assert r.loss < r.loss0 / 10, (r.loss0, r.loss, r.params)
+    assert pd.DataFrame(r.history)["loss"].min() == pytest.approx(r.loss)
+    # forward mode (the default), reverse mode and central differences agree at a point
+    # where the loss is smooth (no sign flip of the sign-based term within the step)
+    z = {"K": jnp.log(0.01), "rho": jnp.log(0.1)}
+    fwd = studies.objective(velocity.factory, velocity.loss, keys)
+    rev = studies.objective(velocity.factory, velocity.loss, keys, mode="reverse")
+    g_fwd = jax.jit(jax.grad(fwd))(z)
+    g_rev = jax.jit(jax.grad(rev))(z)
+    f = jax.jit(fwd)
+    h = 1e-6
+    for k in z:
+        fd = (f({**z, k: z[k] + h}) - f({**z, k: z[k] - h})) / (2 * h)
+        np.testing.assert_allclose(g_fwd[k], fd, rtol=1e-5)
+        np.testing.assert_allclose(g_rev[k], g_fwd[k], rtol=1e-10)
+    with pytest.raises(ValueError, match="positive"):
+        studies.tune(velocity.factory, {"K": -1.0, "rho": 1.0}, velocity.loss, keys)
+
+
+_SHARDED = """
+import json, sys
+import jax, jax.numpy as jnp, numpy as np
+{setup}
+jax.config.update("jax_enable_x64", True)
+from jax.sharding import Mesh
+from visjax import studies
+sys.path.insert(0, {root!r})
+from tests.studies.test_sweep import toy, toy_metrics
+mesh = Mesh(np.array(jax.devices()), ("runs",))
+params = studies.grid(a=[1.0, 2.0, 3.0, 6.0, 0.5])
+sharded = studies.sweep(toy, params, jnp.arange(3), metrics=toy_metrics, chunk=6, mesh=mesh)
+plain = studies.sweep(toy, params, jnp.arange(3), metrics=toy_metrics, chunk=6)
+print(json.dumps({{"devices": len(jax.devices()), "process": jax.process_index(),
+    "equal": bool(sharded.equals(plain)), "rows": len(sharded),
+    "table": sharded.to_json()}}))
+"""
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def _python(code, env_extra, args=()):
+    env = {**os.environ, **env_extra}
+    return subprocess.Popen(
+        [sys.executable, "-c", code, *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=_ROOT,
+    )
+
+
+def _last_json(proc):
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err[-3000:]
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_sharded_over_four_host_devices_equals_unsharded():
+    code = _SHARDED.format(setup="", root=_ROOT)
+    r = _last_json(_python(code, {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}))
+    assert r["devices"] == 4 and r["rows"] == 15 and r["equal"]
+
+
+def test_two_processes_with_jax_distributed():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    setup = textwrap.dedent(
+        f"""
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+        jax.distributed.initialize(coordinator_address="127.0.0.1:{port}",
+                                   num_processes=2, process_id=int(sys.argv[1]))
+        """
+    )
+    code = _SHARDED.format(setup=setup, root=_ROOT)
+    env = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    procs = [_python(code, env, [str(i)]) for i in range(2)]
+    results = [_last_json(p) for p in procs]
+    assert [r["process"] for r in results] == [0, 1]
+    # four devices over two processes; each process holds the whole table, equal to the
+    # unsharded run and to the other process's
+    assert all(r["devices"] == 4 and r["equal"] and r["rows"] == 15 for r in results)
+    assert results[0]["table"] == results[1]["table"]
+
+
+class Scalar(eqx.Module):
+    value: jax.Array
+    result: RESULTS
+
+
+def bowl(params, key):
+    """(log a - log 3)^2 + (log b + 1)^2 plus a key-dependent constant: minimum a=3, b=1/e."""
+    c = jax.random.uniform(key, (), dtype=jnp.float64)
+    v = (jnp.log(params["a"]) - jnp.log(3.0)) ** 2 + (jnp.log(params["b"]) + 1.0) ** 2 + c
+    return Scalar(v, RESULTS.successful)
+
+
+@pytest.mark.parametrize("method", ["optax", "optimistix"])
+def test_tune_finds_minimum_in_log_parameters(method):
+    import optimistix as optx
+
+    opt = optax.adam(0.2) if method == "optax" else optx.BFGS(rtol=1e-8, atol=1e-10)
+    r = studies.tune(
+        bowl, {"a": 1.0, "b": 1.0}, lambda s: s.value, jnp.arange(2), optimiser=opt, steps=100
+    )
+    tol = 1e-2 if method == "optax" else 1e-5  # adam's fixed steps jitter around the minimum
+    assert r.params["a"] == pytest.approx(3.0, rel=tol)
+    assert r.params["b"] == pytest.approx(np.exp(-1.0), rel=tol)
+    assert r.loss < r.loss0 and r.converged

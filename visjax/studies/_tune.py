@@ -1,0 +1,206 @@
+"""`tune`: gradient-based gain tuning through the runner, in log parameters (gains stay
+positive), with an optax optimiser or an optimistix minimiser."""
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._sweep import _key_data
+
+
+@dataclass(frozen=True)
+class TuneResult:
+    """What `tune` returns.
+
+    **Fields:** `params` (the best point met, name -> float or array), `loss` (its loss),
+    `params0`, `loss0` (the start), `history` (one dict per step: `step`, `loss`, and the
+    parameters; loads in pandas), `converged` (the optimistix minimiser's result was
+    successful; always `True` for a fixed number of optax steps)."""
+
+    params: dict
+    loss: float
+    params0: dict
+    loss0: float
+    history: list = field(default_factory=list)
+    converged: bool = True
+
+
+def objective(
+    factory: Callable[[Any, jax.Array], Any],
+    loss: Callable[[Any], jax.Array],
+    keys: Any,
+    *,
+    mode: str = "forward",
+) -> Callable[[dict], jax.Array]:
+    """The tuning objective as a function of the log parameters: `log_params -> mean over
+    the seeds of loss(factory(exp(log_params), key))` (vmapped over the seeds).
+
+    A failed run (any result code but `successful`) makes the objective `inf`, so that no
+    optimiser mistakes a frozen state's numbers for a good loss.
+
+    `mode="forward"`: reverse-mode callers (`jax.grad`, optimistix) get the gradient by
+    forward mode (`jax.jacfwd`) underneath: one tangent per parameter, memory independent
+    of the trajectory's length; the right choice for a handful of gains. `mode="reverse"`:
+    plain reverse mode; for many gains, with a factory that runs with
+    `CheckpointAdjoint()` so the stored trajectory stays bounded.
+    """
+    if mode not in ("forward", "reverse"):
+        raise ValueError(f"`mode` must be 'forward' or 'reverse'; got {mode!r}.")
+    from .._results import RESULTS
+
+    kd = jnp.asarray(_key_data(keys))
+
+    def one(log_params, k):
+        params = jax.tree_util.tree_map(jnp.exp, log_params)
+        sol = factory(params, jax.random.wrap_key_data(k))
+        value = jnp.asarray(loss(sol))
+        ok = (sol.result == RESULTS.successful) & jnp.isfinite(value)
+        return jnp.where(ok, value, jnp.inf)
+
+    def plain(log_params):
+        return jnp.mean(jax.vmap(one, in_axes=(None, 0))(log_params, kd))
+
+    if mode == "reverse":
+        return plain
+
+    @jax.custom_vjp
+    def forward(log_params):
+        return plain(log_params)
+
+    def fwd(log_params):
+        value = plain(log_params)
+        grad = jax.jacfwd(plain)(log_params)
+        return value, grad
+
+    def bwd(grad, cotangent):
+        return (jax.tree_util.tree_map(lambda g: cotangent * g, grad),)
+
+    forward.defvjp(fwd, bwd)
+    return forward
+
+
+def tune(
+    factory: Callable[[Any, jax.Array], Any],
+    params0: Mapping[str, Any],
+    loss: Callable[[Any], jax.Array],
+    keys: Any,
+    *,
+    optimiser: Any = None,
+    steps: int = 40,
+    mode: str = "forward",
+    progress: bool = False,
+) -> TuneResult:
+    """Tune positive parameters (gains) by gradient descent through the runner.
+
+    The parameters are optimised as their logarithms ($p = e^{z}$): they stay positive and
+    a step is relative (a gain spread over decades is as easy to move at 0.01 as at 100).
+
+    **Start from a sweep's best point** (`studies.best`). The sign-based laws of Chitrakaran
+    et al. (the $\\rho\\,\\mathrm{sgn}(\\tilde e)$ term of eq. (40)) and the covariance
+    resetting of Nath et al. make the loss piecewise smooth: within a piece the gradient is
+    exact (tested against finite differences at a small step), but it says nothing about the
+    jumps between pieces, so a gradient method refines a point whose basin a global sweep
+    has found; it does not replace the sweep.
+
+    **Arguments:**
+
+    - `factory`: `(params, key) -> solution` as for `sweep` (a dict of positive parameters).
+    - `params0`: name -> positive float or array, the start.
+    - `loss`: `solution -> scalar`, averaged over `keys`.
+    - `keys`: the training noise seeds (ints or typed keys). Report the tuned gains on
+        other, held-out seeds.
+    - `optimiser`: an `optax.GradientTransformation` (default `optax.adam(0.1)`: steps of
+        about 10% in each gain), run for `steps` steps keeping the best point met; or an
+        `optimistix.AbstractMinimiser` (e.g. `optimistix.BFGS(rtol=1e-4, atol=1e-6)`),
+        run by `optimistix.minimise` with `max_steps=steps`.
+    - `mode`: `"forward"` or `"reverse"` differentiation (see `objective`).
+    - `progress`: a progress bar over the optax steps.
+
+    **Returns:** a `TuneResult`.
+    """
+    import optax
+    import optimistix as optx
+
+    names = list(params0)
+    p0 = {k: np.asarray(v, float) for k, v in params0.items()}
+    for k, v in p0.items():
+        if not np.all(np.isfinite(v)) or np.any(v <= 0):
+            raise ValueError(f"`params0[{k!r}]` must be positive and finite; got {v}.")
+    if steps < 1:
+        raise ValueError(f"`steps` must be at least 1; got {steps}.")
+    z0 = {k: jnp.log(jnp.asarray(v)) for k, v in p0.items()}
+    fn = objective(factory, loss, keys, mode=mode)
+
+    def as_params(z):
+        return {k: _to_py(np.exp(np.asarray(z[k]))) for k in names}
+
+    value_and_grad = eqx.filter_jit(jax.value_and_grad(fn))
+    loss0 = float(value_and_grad(z0)[0])
+    if not np.isfinite(loss0):
+        raise ValueError(
+            "the loss at `params0` is not finite (a run failed or diverged): start from a "
+            "point where every run succeeds, e.g. `studies.best` of a sweep."
+        )
+    history = [{"step": 0, "loss": loss0, **_flat(as_params(z0))}]
+    if optimiser is not None and isinstance(optimiser, optx.AbstractMinimiser):
+        sol = optx.minimise(lambda z, _: fn(z), optimiser, z0, max_steps=steps, throw=False)
+        z_end = sol.value
+        end = float(value_and_grad(z_end)[0])
+        history.append(
+            {"step": int(sol.stats["num_steps"]), "loss": end, **_flat(as_params(z_end))}
+        )
+        converged = bool(sol.result == optx.RESULTS.successful)
+        best_z, best_loss = (z_end, end) if end < loss0 else (z0, loss0)
+        return TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, converged)
+    opt = optax.adam(0.1) if optimiser is None else optimiser
+    with jax.numpy_dtype_promotion("standard"):
+        state = opt.init(z0)
+    z, best_z, best_loss = z0, z0, loss0
+    from tqdm import tqdm
+
+    @eqx.filter_jit
+    def step(z, state):
+        value, grad = jax.value_and_grad(fn)(z)
+        # a failed run gives an infinite loss and no usable gradient: stay put
+        grad = jax.tree_util.tree_map(lambda g: jnp.where(jnp.isfinite(g), g, 0.0), grad)
+        # optax mixes its int32 step count with floats: standard promotion for its update
+        # (the caller may run with strict promotion, as the tests do)
+        with jax.numpy_dtype_promotion("standard"):
+            updates, state = opt.update(grad, state, z)
+            z = optax.apply_updates(z, updates)
+        return value, z, state
+
+    for i in tqdm(range(steps), desc="tune", unit="step", disable=not progress):
+        value, z_next, state = step(z, state)
+        value = float(value)
+        if i > 0:
+            history.append({"step": i, "loss": value, **_flat(as_params(z))})
+        if np.isfinite(value) and value < best_loss:
+            best_z, best_loss = z, value
+        z = z_next
+    end = float(value_and_grad(z)[0])
+    history.append({"step": steps, "loss": end, **_flat(as_params(z))})
+    if np.isfinite(end) and end < best_loss:
+        best_z, best_loss = z, end
+    return TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, True)
+
+
+def _to_py(x):
+    x = np.asarray(x)
+    return float(x) if x.ndim == 0 else x.tolist()
+
+
+def _flat(params: dict) -> dict:
+    out = {}
+    for k, v in params.items():
+        if isinstance(v, list):
+            for i, vi in enumerate(np.ravel(v)):
+                out[f"{k}[{i}]"] = float(vi)
+        else:
+            out[k] = v
+    return out
