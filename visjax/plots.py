@@ -234,3 +234,81 @@ def plot_comparison(records, accuracy, *, label, title=None, path=None):
         ax.set_ylabel(ylabel)
         ax.grid(True, axis="y", which="both", alpha=0.3)
     return _finish(fig, title, path)
+
+
+def plot_sweep(
+    summary, metric, params, *, best=None, paper=None, label=None, title=None, path=None
+):
+    """`visjax sweep` and `visjax tune`: the metric against each parameter (log-log), one
+    panel per parameter. Grey dots: every point's mean over seeds; the line: the best mean
+    at each value of the parameter (over the other parameters), with the spread over seeds
+    (min to max) as a band; points with a failed run as red crosses at the top; the best
+    point (star) and the paper's gains (square) marked with their held-out metric.
+
+    `summary` is `studies.summarise(table, metric)`; `best` and `paper` are dicts with
+    `params` and `metric`."""
+    plt = _pyplot(path)
+    fig, axes = plt.subplots(1, len(params), figsize=(3.4 * len(params), 3.6), squeeze=False)
+    mean = summary[f"{metric}_mean"].to_numpy(float)
+    lo = summary[f"{metric}_min"].to_numpy(float)
+    hi = summary[f"{metric}_max"].to_numpy(float)
+    failed = summary["n_failed"].to_numpy() > 0
+    for ax, p in zip(axes[0], params):
+        x = summary[p].to_numpy(float)
+        ok = ~failed & np.isfinite(mean) & (mean > 0)
+        ax.plot(x[ok], mean[ok], ".", color="0.6", ms=4, label="mean over seeds")
+        xs = np.unique(x[ok])
+        if xs.size:
+            pick = [np.flatnonzero(ok & (x == v))[np.argmin(mean[ok & (x == v)])] for v in xs]
+            ax.plot(xs, mean[pick], "-", color="C0", label="best over the others")
+            ax.fill_between(xs, lo[pick], hi[pick], color="C0", alpha=0.2, label="seed spread")
+        if failed.any():
+            ax.plot(
+                x[failed],
+                np.full(failed.sum(), 1.0),
+                "x",
+                color="C3",
+                transform=ax.get_xaxis_transform(),
+                label="a run failed",
+            )
+        for mark, style, name in ((best, "*", "best (held-out)"), (paper, "s", "paper (held-out)")):
+            if mark is not None and p in mark["params"] and np.isfinite(mark["metric"]):
+                ax.plot(
+                    [mark["params"][p]],
+                    [mark["metric"]],
+                    style,
+                    color="C1" if style == "*" else "k",
+                    ms=10 if style == "*" else 6,
+                    label=name,
+                    zorder=5,
+                )
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(f"{p} (multiplier of the reference gain)")
+        ax.set_ylabel(label or metric)
+        ax.grid(True, which="both", alpha=0.3)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7, frameon=False)
+    if title:
+        import textwrap
+
+        fig.suptitle(textwrap.fill(title, 80), fontsize=9)
+    fig.tight_layout(rect=(0, 0.16, 1, 1))
+    if path is not None:
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig
+
+
+def plot_tune_history(history, *, label=None, title=None, path=None):
+    """`visjax tune`: the training loss per optimiser step (log axis)."""
+    plt = _pyplot(path)
+    fig, ax = plt.subplots(figsize=(4.0, 3.0))
+    steps = [h["step"] for h in history]
+    loss = [h["loss"] for h in history]
+    ax.plot(steps, loss, "o-", ms=3)
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel(label or "training loss")
+    ax.grid(True, which="both", alpha=0.3)
+    return _finish(fig, title, path)

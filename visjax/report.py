@@ -634,6 +634,315 @@ def compare_report(
     return summary
 
 
+def _tuning_setups(problem, data, noise, duration, rate, sets):
+    """[(tag, TuningProblem)] of `visjax sweep` / `visjax tune`: one per thesis set for the
+    structure problem (default: all seven), else one."""
+    from . import studies
+
+    kwargs = {} if duration is None else {"duration": duration}
+    if problem == "velocity":
+        if rate is not None:
+            kwargs["rate_hz"] = rate
+        return [(None, studies.velocity_tuning(noise_px=noise, data=data, **kwargs))]
+    if problem == "euclidean":
+        if rate is not None:
+            kwargs["rate_hz"] = rate
+        return [(None, studies.euclidean_tuning(noise_px=noise, data=data, **kwargs))]
+    if problem == "structure":
+        if data is not None:
+            raise ValueError(
+                "sweeps of the structure observer run on the thesis' sets (their published "
+                "gains are the reference); --data is not supported for it"
+            )
+        from .papers.jang import SETS
+
+        names = list(sets or SETS)
+        return [(n, studies.structure_tuning(set_name=n, noise_px=noise, **kwargs)) for n in names]
+    raise ValueError(f"unknown problem {problem!r}; choose velocity, structure or euclidean")
+
+
+def _held_out(setup, points: dict, seeds: int, chunk: int, mesh):
+    """The metric of each named parameter point on the held-out noise seeds
+    `seeds, ..., 2 seeds - 1` (never seen by the sweep or the tuning): `{name: {"params",
+    "metric", "failed"}}` (`metric` the mean over the successful seeds)."""
+    import jax.numpy as jnp
+
+    from . import studies
+
+    names = list(points)
+    params = {k: np.array([float(points[n][k]) for n in names]) for k in points[names[0]]}
+    table = studies.sweep(
+        setup.factory,
+        params,
+        jnp.arange(seeds, 2 * seeds),
+        metrics=setup.metrics,
+        chunk=chunk,
+        mesh=mesh,
+    )
+    out = {}
+    for i, n in enumerate(names):
+        rows = table[table["point"] == i]
+        ok = rows["result"] == "successful"
+        out[n] = {
+            "params": {k: float(v) for k, v in points[n].items()},
+            "metric": float(rows[ok][setup.metric].mean()) if ok.any() else float("nan"),
+            "failed": int((~ok).sum()),
+        }
+    return out
+
+
+def _mesh(shard: bool):
+    if not shard:
+        return None
+    import jax
+    from jax.sharding import Mesh
+
+    return Mesh(np.array(jax.devices()), ("runs",))
+
+
+def _write_json(path, obj):
+    path.write_text(json.dumps(obj, indent=2, allow_nan=True))
+
+
+def _structure_lmi(setup, params) -> dict:
+    """The LMI of section 3.6 of Jang's thesis for the gains at `params` (multipliers of the
+    published ones): the Lipschitz bound they certify (`certified_lipschitz`), beside the
+    published gains' own."""
+    from .design import certified_lipschitz
+
+    lmi = setup.settings["lmi"]
+    A, C, D = (np.array(lmi[k], float) for k in ("A", "C", "D"))
+    g = setup.gains(params)
+    g0 = setup.gains(setup.paper)
+    tuned = certified_lipschitz(A, C, D, np.array(g["K"]), np.array(g["Y"]))
+    published = certified_lipschitz(A, C, D, np.array(g0["K"]), np.array(g0["Y"]))
+    return {
+        "certified_lipschitz": tuned,
+        "published_certified_lipschitz": published,
+        "satisfies_lmi": bool(tuned > 0),
+        "covers_published_bound": bool(tuned >= published * (1 - 1e-6)),
+    }
+
+
+def _one_sweep(setup, grid, seeds, chunk, mesh, quiet):
+    """Sweep one problem on the training seeds; returns (table, summary, best)."""
+    import jax.numpy as jnp
+
+    from . import studies
+
+    params = studies.parse_grid(grid or setup.grid)
+    table = studies.sweep(
+        setup.factory,
+        params,
+        jnp.arange(seeds),
+        metrics=setup.metrics,
+        chunk=chunk,
+        mesh=mesh,
+        progress=not quiet,
+    )
+    summary = studies.summarise(table, setup.metric)
+    best = studies.best(table, setup.metric)
+    return table, summary, best
+
+
+def _print_result(tag, setup, held, extra=""):
+    head = f"[{tag}] " if tag else ""
+    for name, r in held.items():
+        gains = ", ".join(f"{k} x {v:.3g}" for k, v in r["params"].items())
+        failed = f" ({r['failed']} held-out run(s) failed)" if r["failed"] else ""
+        print(f"{head}{name:<11} {gains:<32} held-out {setup.metric} = {r['metric']:.4g}{failed}")
+    if extra:
+        print(f"{head}{extra}")
+
+
+def sweep_report(
+    problem: str,
+    grid: str | None = None,
+    noise: float = 0.1,
+    seeds: int = 8,
+    data=None,
+    duration: float | None = None,
+    rate: float | None = None,
+    sets=None,
+    chunk: int = 64,
+    shard: bool = False,
+    out=None,
+    quiet: bool = False,
+) -> dict:
+    """`visjax sweep`: a grid of gain multipliers (`--grid`, default the problem's) over
+    `seeds` noise seeds (`studies.sweep`), the best point by the mean metric, and the best
+    point and the paper's gains re-measured on `seeds` held-out seeds. Writes `runs.parquet`,
+    `runs.csv`, `sweep.png` and `summary.json` (`{"metric", "best": {"params", "metric"},
+    "paper": {"params", "metric"}, ...}`, the metrics held-out); for the structure problem
+    one folder per thesis set and a top-level `summary.json` of them by set."""
+    _enable_x64()
+    from . import studies
+    from .plots import plot_sweep
+
+    results = {}
+    mesh = _mesh(shard)
+    for tag, setup in _tuning_setups(problem, data, noise, duration, rate, sets):
+        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet)
+        held = _held_out(setup, {"best": best["params"], "paper": setup.paper}, seeds, chunk, mesh)
+        result = {
+            "metric": setup.metric,
+            "best": {"params": held["best"]["params"], "metric": held["best"]["metric"]},
+            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
+            "problem": setup.name,
+            "grid": grid or setup.grid,
+            "noise_px": noise,
+            "seeds": seeds,
+            "held_out_seeds": [seeds, 2 * seeds - 1],
+            "best_training_metric": best["metric"],
+            "best_gains": setup.gains(best["params"]),
+            "paper_gains": setup.gains(setup.paper),
+            "failed_runs": int((table["result"] != "successful").sum()),
+            "runs": len(table),
+            "settings": setup.settings,
+        }
+        if problem == "structure":
+            result["lmi"] = _structure_lmi(setup, best["params"])
+        _print_result(
+            tag, setup, held, f"{result['failed_runs']} of {len(table)} sweep runs failed"
+        )
+        results[tag] = result
+        if out is not None:
+            folder = Path(out) if tag is None else Path(out) / tag.replace(".", "_")
+            studies.save_table(table, folder)
+            _write_json(folder / "summary.json", result)
+            plot_sweep(
+                summary,
+                setup.metric,
+                list(setup.paper),
+                best=held["best"],
+                paper=held["paper"],
+                label=setup.label,
+                title=setup.name,
+                path=folder / "sweep.png",
+            )
+    if out is not None and problem == "structure":
+        _write_json(Path(out) / "summary.json", results)
+    if out is not None:
+        print(f"wrote {out}")
+    return results if problem == "structure" else results[None]
+
+
+def tune_report(
+    problem: str,
+    grid: str | None = None,
+    noise: float = 0.1,
+    seeds: int = 4,
+    steps: int = 30,
+    learning_rate: float = 0.1,
+    data=None,
+    duration: float | None = None,
+    rate: float | None = None,
+    sets=None,
+    chunk: int = 64,
+    shard: bool = False,
+    out=None,
+    quiet: bool = False,
+) -> dict:
+    """`visjax tune`: a sweep of the grid (`--grid`, default the problem's) on `seeds`
+    training seeds, then `studies.tune` (Adam on the log gains, forward-mode gradients
+    through the runner, `steps` steps) from the sweep's best point on the same seeds; the
+    tuned gains, the sweep's best and the paper's gains re-measured on `seeds` held-out
+    seeds. Writes `runs.parquet`, `runs.csv` (the sweep), `history.csv`, `sweep.png`,
+    `tune.png` and `summary.json` (`{"metric", "best": {"params", "metric"}, "paper":
+    {"params", "metric"}, ...}`: `best` is the tuned point, metrics held-out); for the
+    structure problem one folder per thesis set (with the LMI check of the tuned gains)
+    and a top-level `summary.json` of them by set."""
+    _enable_x64()
+    import jax.numpy as jnp
+    import optax
+    import pandas as pd
+
+    from . import studies
+    from .plots import plot_sweep, plot_tune_history
+
+    results = {}
+    mesh = _mesh(shard)
+    for tag, setup in _tuning_setups(problem, data, noise, duration, rate, sets):
+        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet)
+        tuned = studies.tune(
+            setup.factory,
+            best["params"],
+            setup.loss,
+            jnp.arange(seeds),
+            optimiser=optax.adam(learning_rate),
+            steps=steps,
+            progress=not quiet,
+        )
+        held = _held_out(
+            setup,
+            {"tuned": tuned.params, "sweep best": best["params"], "paper": setup.paper},
+            seeds,
+            chunk,
+            mesh,
+        )
+        result = {
+            "metric": setup.metric,
+            "best": {"params": held["tuned"]["params"], "metric": held["tuned"]["metric"]},
+            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
+            "sweep_best": {
+                "params": held["sweep best"]["params"],
+                "metric": held["sweep best"]["metric"],
+            },
+            "improvement_over_paper": held["paper"]["metric"] / held["tuned"]["metric"],
+            "problem": setup.name,
+            "grid": grid or setup.grid,
+            "noise_px": noise,
+            "seeds": seeds,
+            "held_out_seeds": [seeds, 2 * seeds - 1],
+            "steps": steps,
+            "optimiser": f"optax.adam({learning_rate}) on the log gains, forward mode",
+            "training_loss": {"sweep_best": tuned.loss0, "tuned": tuned.loss},
+            "tuned_gains": setup.gains(tuned.params),
+            "paper_gains": setup.gains(setup.paper),
+            "held_out_failed_runs": {k: v["failed"] for k, v in held.items()},
+            "settings": setup.settings,
+        }
+        extra = (
+            f"held-out improvement over the paper's gains: x {result['improvement_over_paper']:.3g}"
+        )
+        if problem == "structure":
+            result["lmi"] = _structure_lmi(setup, tuned.params)
+            extra += (
+                f"; thesis RMS {setup.settings['thesis_rms_m']}; tuned gains satisfy the LMI "
+                f"of section 3.6: {result['lmi']['satisfies_lmi']} (certified Lipschitz bound "
+                f"{result['lmi']['certified_lipschitz']:.3g}, published gains "
+                f"{result['lmi']['published_certified_lipschitz']:.3g})"
+            )
+        _print_result(tag, setup, held, extra)
+        results[tag] = result
+        if out is not None:
+            folder = Path(out) if tag is None else Path(out) / tag.replace(".", "_")
+            studies.save_table(table, folder)
+            pd.DataFrame(tuned.history).to_csv(folder / "history.csv", index=False)
+            _write_json(folder / "summary.json", result)
+            plot_sweep(
+                summary,
+                setup.metric,
+                list(setup.paper),
+                best=held["tuned"],
+                paper=held["paper"],
+                label=setup.label,
+                title=setup.name,
+                path=folder / "sweep.png",
+            )
+            plot_tune_history(
+                tuned.history,
+                label=f"training {setup.metric}",
+                title=setup.name,
+                path=folder / "tune.png",
+            )
+    if out is not None and problem == "structure":
+        _write_json(Path(out) / "summary.json", results)
+    if out is not None:
+        print(f"wrote {out}")
+    return results if problem == "structure" else results[None]
+
+
 def reproduce(out="results", quick: bool = False, quiet: bool = False) -> dict:
     """Every paper's main experiment into one folder, then a summary table."""
     out = Path(out)

@@ -193,3 +193,20 @@ def test_ultimate_bound_needs_a_uub_design():
     du = design_uio(A, C, D, 0.5, uub=True)
     b1, b2 = du.ultimate_bound([0, 1, 0], 0.1), du.ultimate_bound([0, 1, 0], 0.2)
     assert b1 > 0 and b2 == pytest.approx(2 * b1)
+
+
+def test_certified_lipschitz_of_given_gains():
+    from visjax.design import certified_lipschitz
+
+    s = SETS["I.1"]
+    A, D = np.array(s.A, float), np.array(s.D, float)[:, None]
+    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    # gains designed for a bound certify at least that bound, and no gains certify more
+    # than the largest bound any design reaches
+    design = design_uio(A, C, D, 0.5)
+    certified = certified_lipschitz(A, C, D, design.K, design.Y)
+    assert 0.5 <= certified <= max_lipschitz(A, C, D) * (1 + 1e-3)
+    # the published gains certify a positive bound; with K negated N is not Hurwitz: none
+    assert certified_lipschitz(A, C, D, s.K, s.Y) > 0.0
+    N_bad = certified_lipschitz(A, C, D, -np.array(s.K) * 10, s.Y)
+    assert N_bad == 0.0

@@ -589,3 +589,39 @@ def design_uio_for_motion(
             f"`max_gain` = {max_gain:g}."
         )
     return best, best_rate
+
+
+def certified_lipschitz(A, C, D, K, Y, *, uub: bool = False) -> float:
+    """The largest $\\gamma_1^2 + \\gamma_2^2$ for which given gains $(K, Y)$ satisfy the LMI
+    of section 3.6 (Jang's thesis, condition (3.6)): some $P \\succ 0$ with
+    $N^TP + PN + (\\gamma_1^2 + \\gamma_2^2)PMM^TP + 2I_3 \\prec 0$ ($+I_3$ more for `uub`),
+    $N$, $M$ of eq. (3.5) from the gains. By the Schur complement of the module docstring
+    with $K$, $Y$ fixed the condition is linear in $(P, \\beta)$; $\\beta$ is minimised.
+
+    Returns 0.0 when the condition fails even for $\\bar f = 0$ (then $N$ is not Hurwitz),
+    `inf` when every bound is certified (M = 0). Use it to check gains found by a sweep or
+    by `studies.tune`: they satisfy the thesis' design condition for the Lipschitz bound
+    the returned value covers.
+    """
+    import cvxpy as cp
+
+    A, C, D = _as_arrays(A, C, D)
+    K, Y = np.asarray(K, float), np.asarray(Y, float)
+    CD = C @ D
+    CD_pinv = np.linalg.pinv(CD)
+    E = -D @ CD_pinv + Y @ (np.eye(2) - CD @ CD_pinv)  # eq. (3.5)
+    M = np.eye(3) + E @ C
+    N = M @ A - K @ C
+    P = cp.Variable((3, 3), symmetric=True)
+    beta = cp.Variable(nonneg=True)
+    X = N.T @ P + P @ N + (3.0 if uub else 2.0) * np.eye(3)
+    X = 0.5 * (X + X.T)
+    block = cp.bmat([[X, P @ M], [(P @ M).T, -beta * np.eye(3)]])
+    block = 0.5 * (block + block.T)
+    cons = [P >> _MARGIN * np.eye(3), block << -_MARGIN * np.eye(6)]
+    status = _solve(cp.Problem(cp.Minimize(beta), cons))
+    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or beta.value is None:
+        return 0.0
+    if beta.value <= 1e-12:
+        return float("inf")
+    return float(1.0 / (beta.value * (1.0 + 1e-4) + 1e-9))

@@ -25,4 +25,9 @@ from ._sweep import (
     sweep as sweep,
 )
 from ._tune import TuneResult as TuneResult, objective as objective, tune as tune
-from ._tuning import TuningProblem as TuningProblem, velocity_tuning as velocity_tuning
+from ._tuning import (
+    TuningProblem as TuningProblem,
+    euclidean_tuning as euclidean_tuning,
+    structure_tuning as structure_tuning,
+    velocity_tuning as velocity_tuning,
+)
