@@ -23,6 +23,11 @@ NOTEBOOKS = pathlib.Path(__file__).parents[1] / "notebooks"
             {"VISJAX_NB_DURATION": "3"},
             ("final position errors", "median PE"),
         ),
+        (
+            "gain_tuning.ipynb",
+            {"VISJAX_NB_SHORT": "1"},
+            ("held-out improvement", "certified Lipschitz bound", "central difference"),
+        ),
     ],
 )
 def test_notebook_executes(name, env, expect, monkeypatch):

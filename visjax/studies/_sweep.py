@@ -7,6 +7,7 @@ Helpers build the parameter points: `grid` (the Cartesian product of axes), `log
 and `random_points` (log-uniform samples).
 """
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -179,34 +180,20 @@ def sweep(
     if chunk < 1:
         raise ValueError(f"`chunk` must be at least 1; got {chunk}.")
     devices = 1 if mesh is None else mesh.devices.size
-    chunk = devices * math.ceil(min(chunk, n_points * n_seeds) / devices)
+    # a small sweep runs in one chunk of the next power of two (so that sweeps of similar
+    # sizes share one compilation), a large one in chunks of `chunk`
+    small = 1 << max(0, math.ceil(math.log2(n_points * n_seeds)))
+    chunk = devices * math.ceil(min(chunk, small) / devices)
     n_runs = n_points * n_seeds
     n_chunks = math.ceil(n_runs / chunk)
 
-    def one(point_leaves, kd):
-        point = jax.tree_util.tree_unflatten(treedef, point_leaves)
-        sol = factory(point, jax.random.wrap_key_data(kd))
-        values = {name: jnp.asarray(v) for name, v in dict(metrics(sol)).items()}
-        result = sol.result
-        fresh = (result == RESULTS.successful) & ~all_finite(values)
-        result = RESULTS.where(fresh, RESULTS.nonfinite_output, result)
-        ok = result == RESULTS.successful
-        values = {k: jnp.where(ok, v, jnp.nan) for k, v in values.items()}
-        failed = jnp.asarray(getattr(sol, "failed_sample", -1), jnp.int32)
-        return values, result._value, failed
-
-    batched = jax.vmap(one)
+    compiled = _compiled(factory, metrics, treedef, mesh)
     if mesh is None:
-        compiled = jax.jit(batched)
 
         def place(x):
             return x
     else:
-        from jax.sharding import NamedSharding, PartitionSpec
-
-        split = NamedSharding(mesh, PartitionSpec(mesh.axis_names))
-        whole = NamedSharding(mesh, PartitionSpec())
-        compiled = jax.jit(batched, in_shardings=split, out_shardings=whole)
+        split = _shardings(mesh)[0]
 
         def place(x):  # each process supplies its own devices' shards (multi-process safe)
             return jax.make_array_from_callback(x.shape, split, lambda index: x[index])
@@ -236,6 +223,36 @@ def sweep(
     for name, v in values.items():
         table.update(_columns(name, v))
     return pd.DataFrame(table)
+
+
+def _shardings(mesh):
+    from jax.sharding import NamedSharding, PartitionSpec
+
+    return NamedSharding(mesh, PartitionSpec(mesh.axis_names)), NamedSharding(mesh, PartitionSpec())
+
+
+@functools.lru_cache(maxsize=8)
+def _compiled(factory, metrics, treedef, mesh):
+    """The jitted, vmapped run of one chunk; cached per (factory, metrics, parameter
+    structure, mesh), so that repeated sweeps of one problem compile once per chunk shape."""
+
+    def one(point_leaves, kd):
+        point = jax.tree_util.tree_unflatten(treedef, point_leaves)
+        sol = factory(point, jax.random.wrap_key_data(kd))
+        values = {name: jnp.asarray(v) for name, v in dict(metrics(sol)).items()}
+        result = sol.result
+        fresh = (result == RESULTS.successful) & ~all_finite(values)
+        result = RESULTS.where(fresh, RESULTS.nonfinite_output, result)
+        ok = result == RESULTS.successful
+        values = {k: jnp.where(ok, v, jnp.nan) for k, v in values.items()}
+        failed = jnp.asarray(getattr(sol, "failed_sample", -1), jnp.int32)
+        return values, result._value, failed
+
+    batched = jax.vmap(one)
+    if mesh is None:
+        return jax.jit(batched)
+    split, whole = _shardings(mesh)
+    return jax.jit(batched, in_shardings=split, out_shardings=whole)
 
 
 def _is_key_array(keys) -> bool:

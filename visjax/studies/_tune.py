@@ -139,28 +139,28 @@ def tune(
     def as_params(z):
         return {k: _to_py(np.exp(np.asarray(z[k]))) for k in names}
 
-    value_and_grad = eqx.filter_jit(jax.value_and_grad(fn))
-    loss0 = float(value_and_grad(z0)[0])
-    if not np.isfinite(loss0):
-        raise ValueError(
-            "the loss at `params0` is not finite (a run failed or diverged): start from a "
-            "point where every run succeeds, e.g. `studies.best` of a sweep."
-        )
-    history = [{"step": 0, "loss": loss0, **_flat(as_params(z0))}]
+    not_finite = (
+        "the loss at `params0` is not finite (a run failed or diverged): start from a "
+        "point where every run succeeds, e.g. `studies.best` of a sweep."
+    )
     if optimiser is not None and isinstance(optimiser, optx.AbstractMinimiser):
+        value = eqx.filter_jit(fn)
+        loss0 = float(value(z0))
+        if not np.isfinite(loss0):
+            raise ValueError(not_finite)
         sol = optx.minimise(lambda z, _: fn(z), optimiser, z0, max_steps=steps, throw=False)
         z_end = sol.value
-        end = float(value_and_grad(z_end)[0])
-        history.append(
-            {"step": int(sol.stats["num_steps"]), "loss": end, **_flat(as_params(z_end))}
-        )
+        end = float(value(z_end))
+        history = [
+            {"step": 0, "loss": loss0, **_flat(as_params(z0))},
+            {"step": int(sol.stats["num_steps"]), "loss": end, **_flat(as_params(z_end))},
+        ]
         converged = bool(sol.result == optx.RESULTS.successful)
         best_z, best_loss = (z_end, end) if end < loss0 else (z0, loss0)
         return TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, converged)
     opt = optax.adam(0.1) if optimiser is None else optimiser
     with jax.numpy_dtype_promotion("standard"):
         state = opt.init(z0)
-    z, best_z, best_loss = z0, z0, loss0
     from tqdm import tqdm
 
     @eqx.filter_jit
@@ -175,18 +175,21 @@ def tune(
             z = optax.apply_updates(z, updates)
         return value, z, state
 
-    for i in tqdm(range(steps), desc="tune", unit="step", disable=not progress):
-        value, z_next, state = step(z, state)
+    # steps + 1 evaluations of one compiled step: the loss at z_0 ... z_steps (the last
+    # update is not taken)
+    history, z = [], z0
+    best_z, best_loss, loss0 = z0, np.inf, np.nan
+    for i in tqdm(range(steps + 1), desc="tune", unit="step", disable=not progress):
+        value, z_next, state_next = step(z, state)
         value = float(value)
-        if i > 0:
-            history.append({"step": i, "loss": value, **_flat(as_params(z))})
+        if i == 0:
+            if not np.isfinite(value):
+                raise ValueError(not_finite)
+            loss0 = value
+        history.append({"step": i, "loss": value, **_flat(as_params(z))})
         if np.isfinite(value) and value < best_loss:
             best_z, best_loss = z, value
-        z = z_next
-    end = float(value_and_grad(z)[0])
-    history.append({"step": steps, "loss": end, **_flat(as_params(z))})
-    if np.isfinite(end) and end < best_loss:
-        best_z, best_loss = z, end
+        z, state = z_next, state_next
     return TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, True)
 
 
