@@ -281,7 +281,8 @@ def test_sweep_command_table_summary_and_flagged_gain(tmp_path, capsys):
     # K x 10 breaks Euler's stability bound at 1 kHz: flagged rows without numbers
     bad = table[table["K"] == 10.0]
     assert set(bad["result"]) == {"unstable_step"} and bad["rms_worst"].isna().all()
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    # strict JSON (no NaN): loads with any parser
+    summary = json.loads((tmp_path / "summary.json").read_text(), parse_constant=pytest.fail)
     assert summary["metric"] == "rms_worst"
     assert summary["best"]["params"] == {"K": 0.01, "rho": 0.1}
     assert summary["paper"]["params"] == {"K": 1.0, "rho": 1.0}

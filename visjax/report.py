@@ -2,6 +2,7 @@
 printed tables, and `reproduce`, which runs them all. The command line calls these."""
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -700,8 +701,19 @@ def _mesh(shard: bool):
     return Mesh(np.array(jax.devices()), ("runs",))
 
 
+def _finite_or_null(obj):
+    """NaN and inf as JSON null (strict JSON; pandas and every parser load it)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_null(v) for v in obj]
+    return obj
+
+
 def _write_json(path, obj):
-    path.write_text(json.dumps(obj, indent=2, allow_nan=True))
+    path.write_text(json.dumps(_finite_or_null(obj), indent=2, allow_nan=False))
 
 
 def _structure_lmi(setup, params) -> dict:
