@@ -53,6 +53,7 @@ def velocity_tuning(
     duration: float = 10.0,
     rate_hz: float = 1000.0,
     data=None,
+    adjoint=None,
 ) -> TuningProblem:
     """The velocity estimator of Chitrakaran et al. (eqs. (39)-(40)) with gains
     $K = k_K K_{63}$, $\\rho = k_\\rho \\rho_{63}$ (the published gains of eq. (63), or the
@@ -65,15 +66,25 @@ def velocity_tuning(
     the run). Metrics: `rms` (6,), the RMS error per degree of freedom over the paper's
     window (5-10 s, the second half of a shorter run; `papers.chitrakaran.window`), and
     `rms_worst`, its largest component (m/s and rad/s mixed, as in the paper's Table I);
-    the loss is `rms_worst`.
+    the loss is `rms_worst`. `adjoint`: the runner's (default `DirectAdjoint()`;
+    `CheckpointAdjoint()` for reverse-mode tuning of many gains, e.g. per-axis multipliers:
+    `K` and `rho` may be (6,) arrays).
     """
     import jax
     import jax.numpy as jnp
 
-    from ..estimators import SaveAt, VelocityEstimator, WindowRMS, fixed_camera_stream, run
+    from ..estimators import (
+        DirectAdjoint,
+        SaveAt,
+        VelocityEstimator,
+        WindowRMS,
+        fixed_camera_stream,
+        run,
+    )
     from ..papers.chitrakaran import window
     from ._problems import velocity_source
 
+    adj = DirectAdjoint() if adjoint is None else adjoint
     v = velocity_source(data, duration, rate_hz)
     if v.truth is None:
         raise ValueError(f"{data}: tuning needs the file's true velocity (`velocity`).")
@@ -101,7 +112,9 @@ def velocity_tuning(
             throw=False,
         )
         est = VelocityEstimator(K=params["K"] * K0, rho=params["rho"] * rho0)
-        return run(est, stream, saveat=SaveAt(outputs=False), reducer=reducer, throw=False)
+        return run(
+            est, stream, saveat=SaveAt(outputs=False), reducer=reducer, adjoint=adj, throw=False
+        )
 
     def metrics(sol):
         rms = _rms_of(sol.summary)
@@ -142,6 +155,7 @@ def structure_tuning(
     set_name: str = "I.1",
     noise_px: float = 0.1,
     duration: float = 20.0,
+    adjoint=None,
 ) -> TuningProblem:
     """The unknown input observer of Jang's thesis (eq. (3.5)) on the simulated analogue of
     a thesis set, with gains $K = k_K K_{pub}$, $Y = k_Y Y_{pub}$ (the set's published
@@ -159,11 +173,12 @@ def structure_tuning(
     import jax
     import jax.numpy as jnp
 
-    from ..estimators import SaveAt, WindowRMS, moving_camera_stream, run
+    from ..estimators import DirectAdjoint, SaveAt, WindowRMS, moving_camera_stream, run
     from ..papers import jang
 
     if set_name not in jang.SETS:
         raise ValueError(f"unknown set {set_name!r}; choose from {list(jang.SETS)}.")
+    adj = DirectAdjoint() if adjoint is None else adjoint
     s = jang.SETS[set_name]
     sc = jang.scenario(set_name, duration)
     k = sc.frame_index
@@ -178,7 +193,9 @@ def structure_tuning(
             sc.ts, pixels[k], sc.frame_velocities[k], sc.Kc_observer, truth=truth_cm
         )
         obs = jang.observer(set_name, K=params["K"] * K0, Y=params["Y"] * Y0)
-        return run(obs, stream, saveat=SaveAt(outputs=False), reducer=reducer, throw=False)
+        return run(
+            obs, stream, saveat=SaveAt(outputs=False), reducer=reducer, adjoint=adj, throw=False
+        )
 
     def metrics(sol):
         rms = _rms_of(sol.summary) / 100.0  # cm -> m
@@ -223,6 +240,7 @@ def euclidean_tuning(
     duration: float = 20.0,
     rate_hz: float = 100.0,
     data=None,
+    adjoint=None,
 ) -> TuningProblem:
     """The adaptive least-squares estimator of Nath et al. (eqs. (37)-(51)) from nominal
     values (`AdaptiveStructureEstimator.from_nominal`, derived per run from that run's
@@ -239,7 +257,7 @@ def euclidean_tuning(
     import jax
     import jax.numpy as jnp
 
-    from ..estimators import AdaptiveStructureEstimator, SaveAt, platform_stream, run
+    from ..estimators import AdaptiveStructureEstimator, DirectAdjoint, SaveAt, platform_stream, run
     from ..papers import nath
 
     if data is None:
@@ -261,6 +279,7 @@ def euclidean_tuning(
         clean, n_known, truth = jnp.asarray(d.pixels, float), d.n_known, jnp.asarray(d.features)
         nominal = (d.A_nominal, d.R_c_nominal, d.x_c_nominal)
         source = str(data)
+    adj = DirectAdjoint() if adjoint is None else adjoint
     interval = float(np.max(np.diff(np.asarray(ts))))
     dt = None if interval <= 1e-3 else 1e-3
 
@@ -279,7 +298,7 @@ def euclidean_tuning(
                 params["gamma"] * est.gamma_s0,
             ),
         )
-        sol = run(est, stream, dt=dt, saveat=SaveAt(outputs=False), throw=False)
+        sol = run(est, stream, dt=dt, saveat=SaveAt(outputs=False), adjoint=adj, throw=False)
         last = jax.tree_util.tree_map(lambda x: x[-1], stream.ys)
         omega_s = est.output(ts[-1], sol.final_state, last).omega_s
         return _WithFinal(sol.result, sol.failed_sample, omega_s)
