@@ -1,6 +1,7 @@
 """The reproduction report: each paper's experiment as figures, `summary.json` and the
 printed tables, and `reproduce`, which runs them all. The command line calls these."""
 
+import functools
 import json
 import math
 import time
@@ -637,18 +638,13 @@ def compare_report(
 
 def _tuning_setups(problem, data, noise, duration, rate, sets):
     """[(tag, TuningProblem)] of `visjax sweep` / `visjax tune`: one per thesis set for the
-    structure problem (default: all seven), else one."""
-    from . import studies
+    structure problem (default: all seven), else one. Set-ups are cached per process (a
+    data file by its path and modification time), so a `tune` after a `sweep` of the same
+    problem reuses its calibration and its compiled runs."""
+    import os
 
-    kwargs = {} if duration is None else {"duration": duration}
-    if problem == "velocity":
-        if rate is not None:
-            kwargs["rate_hz"] = rate
-        return [(None, studies.velocity_tuning(noise_px=noise, data=data, **kwargs))]
-    if problem == "euclidean":
-        if rate is not None:
-            kwargs["rate_hz"] = rate
-        return [(None, studies.euclidean_tuning(noise_px=noise, data=data, **kwargs))]
+    if problem not in ("velocity", "structure", "euclidean"):
+        raise ValueError(f"unknown problem {problem!r}; choose velocity, structure or euclidean")
     if problem == "structure":
         if data is not None:
             raise ValueError(
@@ -657,9 +653,26 @@ def _tuning_setups(problem, data, noise, duration, rate, sets):
             )
         from .papers.jang import SETS
 
-        names = list(sets or SETS)
-        return [(n, studies.structure_tuning(set_name=n, noise_px=noise, **kwargs)) for n in names]
-    raise ValueError(f"unknown problem {problem!r}; choose velocity, structure or euclidean")
+        return [
+            (n, _tuning_setup(problem, noise, None, None, duration, None, n))
+            for n in list(sets or SETS)
+        ]
+    stamp = None if data is None else os.path.getmtime(data)
+    data = None if data is None else str(data)
+    return [(None, _tuning_setup(problem, noise, data, stamp, duration, rate, None))]
+
+
+@functools.lru_cache(maxsize=16)
+def _tuning_setup(problem, noise, data, stamp, duration, rate, set_name):
+    from . import studies
+
+    kwargs = {} if duration is None else {"duration": duration}
+    if problem == "structure":
+        return studies.structure_tuning(set_name=set_name, noise_px=noise, **kwargs)
+    if rate is not None:
+        kwargs["rate_hz"] = rate
+    make = studies.velocity_tuning if problem == "velocity" else studies.euclidean_tuning
+    return make(noise_px=noise, data=data, **kwargs)
 
 
 def _held_out(setup, points: dict, seeds: int, chunk: int, mesh):

@@ -270,3 +270,39 @@ def test_velocity_sweep_on_a_data_file_with_dropouts(tmp_path):
     )
     assert (table["result"] == "successful").all()
     assert np.isfinite(table["rms_worst"]).all() and (table["rms_worst"] > 0).all()
+
+
+def test_euclidean_tuning_from_a_file_equals_the_scene(tmp_path):
+    """`euclidean_tuning(data=FILE)` on a file written from the project's scene gives the
+    scene's own runs (same pixels, same noise per seed) to 1e-12; a gain past Euler's
+    bound is a flagged row."""
+    from visjax.io import EuclideanData
+    from visjax.papers import nath
+
+    sc = nath.scenario(2.0, 20.0)
+    A0, R0, x0 = nath.nominal_camera()
+    path = tmp_path / "euclidean.npz"
+    EuclideanData(
+        t=np.asarray(sc.ts),
+        pixels=np.asarray(jnp.concatenate([sc.p_c, sc.p_s], 1)),
+        platform_R=np.asarray(sc.R_b),
+        platform_x=np.asarray(sc.x_b),
+        known_features=np.asarray(sc.omega_c),
+        A_nominal=np.asarray(A0),
+        R_c_nominal=np.asarray(R0),
+        x_c_nominal=np.asarray(x0),
+        features=np.asarray(sc.omega_s),
+    ).save(path)
+    params = {"alpha": jnp.array([1.0, 30.0]), "gamma": jnp.array([1.0, 30.0])}
+    tables = [
+        studies.sweep(s.factory, params, jnp.arange(1), metrics=s.metrics)
+        for s in (
+            studies.euclidean_tuning(noise_px=0.1, duration=2.0, rate_hz=20.0),
+            studies.euclidean_tuning(noise_px=0.1, data=path),
+        )
+    ]
+    a, b = (t.iloc[0] for t in tables)
+    assert a["result"] == b["result"] == "successful"
+    np.testing.assert_allclose(b["error_worst"], a["error_worst"], rtol=1e-12)
+    assert 0 < a["error_worst"] < 0.5
+    assert {t.iloc[1]["result"] for t in tables} == {"unstable_step"}
