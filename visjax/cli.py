@@ -166,7 +166,10 @@ def _add_study_options(parser, seeds: int) -> None:
     )
     parser.add_argument("--chunk", type=_count, default=64, help="runs per vmap call (64)")
     parser.add_argument(
-        "--shard", action="store_true", help="shard each chunk over every JAX device"
+        "--shard",
+        action="store_true",
+        help="shard each chunk over every JAX device (GPUs; on CPUs one process per device "
+        "with jax.distributed, see README)",
     )
     parser.add_argument("--out", type=str, default=None, help="directory for the outputs")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -2,6 +2,7 @@
 gradients on the velocity estimator of Chitrakaran et al.; sharding over a mesh of four
 host devices and over two `jax.distributed` processes (subprocesses)."""
 
+import io
 import json
 import os
 import socket
@@ -203,26 +204,50 @@ def test_sharded_over_four_host_devices_equals_unsharded():
     assert r["devices"] == 4 and r["rows"] == 15 and r["equal"]
 
 
-def test_two_processes_with_jax_distributed():
+_VELOCITY = """
+import json, sys
+import jax
+{setup}
+import jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
+from jax.sharding import Mesh
+from visjax import studies
+setup = studies.velocity_tuning(noise_px=0.1, duration=2.0)
+params = {{"K": np.array([0.01, 1.0, 10.0]), "rho": np.array([0.1, 1.0, 1.0])}}
+mesh = Mesh(np.array(jax.devices()), ("runs",))
+t = studies.sweep(setup.factory, params, jnp.arange(2), metrics=setup.metrics, mesh=mesh)
+print(json.dumps({{"devices": len(jax.devices()), "process": jax.process_index(),
+    "table": t.to_json(double_precision=15)}}))
+"""
+
+
+def test_two_processes_with_jax_distributed(velocity):
+    """Two processes on localhost (CPU collectives by gloo), one device each, the velocity
+    estimator (a full run per row): every process holds the whole table, equal to the
+    unsharded sweep, flagged rows included."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    setup = textwrap.dedent(
+    setup_code = textwrap.dedent(
         f"""
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
         jax.distributed.initialize(coordinator_address="127.0.0.1:{port}",
                                    num_processes=2, process_id=int(sys.argv[1]))
         """
     )
-    code = _SHARDED.format(setup=setup, root=_ROOT)
-    env = {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
-    procs = [_python(code, env, [str(i)]) for i in range(2)]
+    code = _VELOCITY.format(setup=setup_code)
+    procs = [_python(code, {}, [str(i)]) for i in range(2)]
     results = [_last_json(p) for p in procs]
     assert [r["process"] for r in results] == [0, 1]
-    # four devices over two processes; each process holds the whole table, equal to the
-    # unsharded run and to the other process's
-    assert all(r["devices"] == 4 and r["equal"] and r["rows"] == 15 for r in results)
+    assert all(r["devices"] == 2 for r in results)
     assert results[0]["table"] == results[1]["table"]
+    sharded = pd.read_json(io.StringIO(results[0]["table"]))
+    # the unsharded sweep of the module's test above (same problem, same compiled chunk)
+    params = {"K": np.array([0.01, 1.0, 10.0]), "rho": np.array([0.1, 1.0, 1.0])}
+    plain = studies.sweep(velocity.factory, params, jnp.arange(2), metrics=velocity.metrics)
+    assert list(sharded["result"]) == list(plain["result"])
+    assert list(plain["result"][-2:]) == ["unstable_step"] * 2
+    np.testing.assert_allclose(sharded["rms_worst"], plain["rms_worst"], rtol=1e-12)
 
 
 class Scalar(eqx.Module):

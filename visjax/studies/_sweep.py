@@ -15,6 +15,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
 
 from .._results import RESULTS, all_finite
 
@@ -150,7 +151,10 @@ def sweep(
         mesh axes flattened) and the results gathered to every process. With
         `jax.distributed.initialize` before the call and a mesh over `jax.devices()`, the
         same call spreads a sweep over several processes or hosts (each process builds the
-        same table; write it from `jax.process_index() == 0`).
+        same table; write it from `jax.process_index() == 0`). Each device runs the `vmap`
+        of its own runs (`jax.shard_map`). On a CPU, several host devices in one process
+        (`--xla_force_host_platform_device_count`) were seen to hang on the full
+        estimators' programs: use one process per device there.
     - `progress`: a progress bar (tqdm) over the chunks.
 
     **Returns:** a `pandas.DataFrame`, one row per run (point-major, the seed fastest):
@@ -193,7 +197,7 @@ def sweep(
         def place(x):
             return x
     else:
-        split = _shardings(mesh)[0]
+        split = _sharding(mesh)
 
         def place(x):  # each process supplies its own devices' shards (multi-process safe)
             return jax.make_array_from_callback(x.shape, split, lambda index: x[index])
@@ -207,7 +211,7 @@ def sweep(
         point_leaves = [place(leaf[runs // n_seeds]) for leaf in leaves]
         kd = place(key_data[runs % n_seeds])
         out = compiled(point_leaves, kd)
-        collected.append(jax.tree_util.tree_map(np.asarray, out))
+        collected.append(_gather(out, mesh is not None))
     values, codes, failed = jax.tree_util.tree_map(
         lambda *xs: np.concatenate(xs)[:n_runs], *collected
     )
@@ -225,10 +229,8 @@ def sweep(
     return pd.DataFrame(table)
 
 
-def _shardings(mesh):
-    from jax.sharding import NamedSharding, PartitionSpec
-
-    return NamedSharding(mesh, PartitionSpec(mesh.axis_names)), NamedSharding(mesh, PartitionSpec())
+def _sharding(mesh):
+    return NamedSharding(mesh, PartitionSpec(mesh.axis_names))
 
 
 @functools.lru_cache(maxsize=8)
@@ -251,8 +253,24 @@ def _compiled(factory, metrics, treedef, mesh):
     batched = jax.vmap(one)
     if mesh is None:
         return jax.jit(batched)
-    split, whole = _shardings(mesh)
-    return jax.jit(batched, in_shardings=split, out_shardings=whole)
+    # `shard_map`: every device runs the vmap of its own runs, with no communication (under
+    # `jit` with sharding annotations alone, a loop whose predicate is batched would reduce
+    # it across devices at every iteration: a collective per step, which deadlocks host
+    # devices on a small machine)
+    spec = PartitionSpec(mesh.axis_names)
+    return jax.jit(
+        jax.shard_map(batched, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+    )
+
+
+def _gather(tree, sharded: bool):
+    """A result on the host: a sharded one from every process (an all-gather across
+    processes); an unsharded one is this process's own."""
+    if not sharded or jax.process_count() == 1:
+        return jax.tree_util.tree_map(np.asarray, tree)
+    from jax.experimental import multihost_utils
+
+    return jax.tree_util.tree_map(np.asarray, multihost_utils.process_allgather(tree, tiled=True))
 
 
 def _is_key_array(keys) -> bool:
