@@ -41,3 +41,27 @@ class without_jaxtyping:
 
         jaxtyping.config.update("jaxtyping_disable", False)
         return False
+
+
+def euclidean_scene_file(path, duration: float, rate_hz: float):
+    """The project's scene of Nath et al. (`papers.nath.scenario`) written as a
+    `EuclideanData` file at `path`, with its nominal camera and true features."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from visjax.io import EuclideanData
+    from visjax.papers import nath
+
+    sc = nath.scenario(duration, rate_hz)
+    A0, R0, x0 = nath.nominal_camera()
+    return EuclideanData(
+        t=np.asarray(sc.ts),
+        pixels=np.asarray(jnp.concatenate([sc.p_c, sc.p_s], 1)),
+        platform_R=np.asarray(sc.R_b),
+        platform_x=np.asarray(sc.x_b),
+        known_features=np.asarray(sc.omega_c),
+        A_nominal=np.asarray(A0),
+        R_c_nominal=np.asarray(R0),
+        x_c_nominal=np.asarray(x0),
+        features=np.asarray(sc.omega_s),
+    ).save(path)

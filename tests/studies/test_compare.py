@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from tests.helpers import euclidean_scene_file
 from visjax._results import RESULTS
 from visjax.studies import compare
 
@@ -71,26 +72,12 @@ def test_bad_arguments():
 def test_velocity_and_euclidean_problems_on_data_files(tmp_path):
     """The two other problems of `visjax compare`, from data files (noise on top of the
     file's pixels): every method succeeds and scores with the estimator's own keys."""
-    import jax.numpy as jnp
 
-    from visjax.io import EuclideanData, VelocityData
-    from visjax.papers import chitrakaran, nath
+    from visjax.io import VelocityData
+    from visjax.papers import chitrakaran
     from visjax.studies import euclidean_problem, velocity_problem
 
-    sc = nath.scenario(2.0, 20.0)
-    A0, R0, x0 = nath.nominal_camera()
-    path = tmp_path / "euclidean.npz"
-    EuclideanData(
-        t=np.asarray(sc.ts),
-        pixels=np.asarray(jnp.concatenate([sc.p_c, sc.p_s], 1)),
-        platform_R=np.asarray(sc.R_b),
-        platform_x=np.asarray(sc.x_b),
-        known_features=np.asarray(sc.omega_c),
-        A_nominal=np.asarray(A0),
-        R_c_nominal=np.asarray(R0),
-        x_c_nominal=np.asarray(x0),
-        features=np.asarray(sc.omega_s),
-    ).save(path)
+    path = euclidean_scene_file(tmp_path / "euclidean.npz", 2.0, 20.0)
     v = chitrakaran.section6_scenario(0.3, 1000.0)
     vpath = tmp_path / "velocity.npz"
     VelocityData(

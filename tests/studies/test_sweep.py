@@ -18,6 +18,7 @@ import optax
 import pandas as pd
 import pytest
 
+from tests.helpers import euclidean_scene_file
 from visjax import studies
 from visjax._results import RESULTS
 from visjax.estimators import CheckpointAdjoint
@@ -301,23 +302,7 @@ def test_euclidean_tuning_from_a_file_equals_the_scene(tmp_path):
     """`euclidean_tuning(data=FILE)` on a file written from the project's scene gives the
     scene's own runs (same pixels, same noise per seed) to 1e-12; a gain past Euler's
     bound is a flagged row."""
-    from visjax.io import EuclideanData
-    from visjax.papers import nath
-
-    sc = nath.scenario(2.0, 20.0)
-    A0, R0, x0 = nath.nominal_camera()
-    path = tmp_path / "euclidean.npz"
-    EuclideanData(
-        t=np.asarray(sc.ts),
-        pixels=np.asarray(jnp.concatenate([sc.p_c, sc.p_s], 1)),
-        platform_R=np.asarray(sc.R_b),
-        platform_x=np.asarray(sc.x_b),
-        known_features=np.asarray(sc.omega_c),
-        A_nominal=np.asarray(A0),
-        R_c_nominal=np.asarray(R0),
-        x_c_nominal=np.asarray(x0),
-        features=np.asarray(sc.omega_s),
-    ).save(path)
+    path = euclidean_scene_file(tmp_path / "euclidean.npz", 2.0, 20.0)
     params = {"alpha": jnp.array([1.0, 30.0]), "gamma": jnp.array([1.0, 30.0])}
     tables = [
         studies.sweep(s.factory, params, jnp.arange(1), metrics=s.metrics)

@@ -338,6 +338,44 @@ def _with_velocity(sol, v_hat, v_object, result, failed):
     )
 
 
+def euclidean_source(data, duration: float, rate_hz: float):
+    """The inputs of the uncalibrated structure problem of Nath et al.: the project's scene
+    (`papers.nath.scenario`, `duration` at `rate_hz`, the nominal camera of
+    `nath.nominal_camera`) or a `EuclideanData` file.
+
+    **Returns:** `(ts, R_b, x_b, omega_c, pixels, n_known, truth, nominal, source)`: the
+    noise-free pixels with the known features first, `truth` the unknown features' world
+    positions (`None` if the file has none), `nominal` `(A, R_c, x_c)`."""
+    import jax.numpy as jnp
+
+    from ..papers import nath
+
+    if data is None:
+        sc = nath.scenario(duration, rate_hz)
+        pixels = jnp.concatenate([sc.p_c, sc.p_s], axis=1)
+        source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz"
+        return (
+            sc.ts,
+            sc.R_b,
+            sc.x_b,
+            sc.omega_c,
+            pixels,
+            sc.p_c.shape[1],
+            sc.omega_s,
+            nath.nominal_camera(),
+            source,
+        )
+    from ..io import EuclideanData
+
+    d = EuclideanData.load(data)
+    ts, R_b, x_b, omega_c = (
+        jnp.asarray(x, float) for x in (d.t, d.platform_R, d.platform_x, d.known_features)
+    )
+    truth = None if d.features is None else jnp.asarray(d.features, float)
+    nominal = (d.A_nominal, d.R_c_nominal, d.x_c_nominal)
+    return ts, R_b, x_b, omega_c, jnp.asarray(d.pixels, float), d.n_known, truth, nominal, str(data)
+
+
 def euclidean_problem(
     *,
     data=None,
@@ -357,29 +395,13 @@ def euclidean_problem(
     EKF assumes the pixel noise `r_px = max(noise_px, 0.05)`; its prior spreads are those
     of `euclidean_ekf` (a nominal camera's uncertainty).
     """
-    import jax.numpy as jnp
 
     from ..baselines import bundle_adjustment, euclidean_ekf
     from ..estimators import AdaptiveStructureEstimator, SaveAt, Stream, platform_stream, run
-    from ..papers import nath
 
-    if data is None:
-        sc = nath.scenario(duration, rate_hz)
-        ts, R_b, x_b, omega_c = sc.ts, sc.R_b, sc.x_b, sc.omega_c
-        clean = jnp.concatenate([sc.p_c, sc.p_s], axis=1)
-        k, truth = sc.p_c.shape[1], sc.omega_s
-        nominal = nath.nominal_camera()
-        source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz"
-    else:
-        from ..io import EuclideanData
-
-        d = EuclideanData.load(data)
-        ts, R_b, x_b, omega_c = (
-            jnp.asarray(x, float) for x in (d.t, d.platform_R, d.platform_x, d.known_features)
-        )
-        clean, k, truth = jnp.asarray(d.pixels, float), d.n_known, d.features
-        nominal = (d.A_nominal, d.R_c_nominal, d.x_c_nominal)
-        source = str(data)
+    ts, R_b, x_b, omega_c, clean, k, truth, nominal, source = euclidean_source(
+        data, duration, rate_hz
+    )
     interval = float(np.max(np.diff(np.asarray(ts))))
     dt = None if interval <= 1e-3 else 1e-3
     every_out = max(1, int(round(interval / (dt or interval))))

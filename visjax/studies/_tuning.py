@@ -258,27 +258,13 @@ def euclidean_tuning(
     import jax.numpy as jnp
 
     from ..estimators import AdaptiveStructureEstimator, DirectAdjoint, SaveAt, platform_stream, run
-    from ..papers import nath
+    from ._problems import euclidean_source
 
-    if data is None:
-        sc = nath.scenario(duration, rate_hz)
-        ts, R_b, x_b, omega_c = sc.ts, sc.R_b, sc.x_b, sc.omega_c
-        clean = jnp.concatenate([sc.p_c, sc.p_s], axis=1)
-        n_known, truth = sc.p_c.shape[1], sc.omega_s
-        nominal = nath.nominal_camera()
-        source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz"
-    else:
-        from ..io import EuclideanData
-
-        d = EuclideanData.load(data)
-        if d.features is None:
-            raise ValueError(f"{data}: tuning needs the file's true feature positions.")
-        ts, R_b, x_b, omega_c = (
-            jnp.asarray(x, float) for x in (d.t, d.platform_R, d.platform_x, d.known_features)
-        )
-        clean, n_known, truth = jnp.asarray(d.pixels, float), d.n_known, jnp.asarray(d.features)
-        nominal = (d.A_nominal, d.R_c_nominal, d.x_c_nominal)
-        source = str(data)
+    ts, R_b, x_b, omega_c, clean, n_known, truth, nominal, source = euclidean_source(
+        data, duration, rate_hz
+    )
+    if truth is None:
+        raise ValueError(f"{data}: tuning needs the file's true feature positions.")
     adj = DirectAdjoint() if adjoint is None else adjoint
     interval = float(np.max(np.diff(np.asarray(ts))))
     dt = None if interval <= 1e-3 else 1e-3
