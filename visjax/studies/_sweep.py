@@ -142,11 +142,14 @@ def sweep(
         `parse_grid` or `random_points` build one).
     - `keys`: S noise seeds: a 1-D array of ints (`jax.random.key(seed)` each) or of typed
         PRNG keys (the table's `seed` column is then the index).
-    - `metrics`: `solution -> {name: array}`, computed inside the batch (scalars or small
-        arrays; an array becomes one column per component, `name[i]`).
+    - `metrics`: `solution -> {name: array}`, computed inside the batch (floating scalars
+        or small arrays; an array becomes one column per component, `name[i]`).
     - `chunk`: runs per compiled `vmap` call (rounded up to a multiple of the mesh's device
         count): memory is bounded by one chunk whatever P x S is. The last chunk is padded
-        with repeats of the last run (discarded), so one compilation serves every chunk.
+        with repeats of the last run (discarded), so one compilation serves every chunk; a
+        sweep smaller than `chunk` runs as one chunk of the next power of two. The compiled
+        chunk is cached per (`factory`, `metrics`, structure of `params`, `mesh`): a second
+        sweep of the same problem and chunk size does not compile again.
     - `mesh`: a `jax.sharding.Mesh`: each chunk's runs are sharded over all its devices (all
         mesh axes flattened) and the results gathered to every process. With
         `jax.distributed.initialize` before the call and a mesh over `jax.devices()`, the
@@ -254,9 +257,8 @@ def _compiled(factory, metrics, treedef, mesh):
     if mesh is None:
         return jax.jit(batched)
     # `shard_map`: every device runs the vmap of its own runs, with no communication (under
-    # `jit` with sharding annotations alone, a loop whose predicate is batched would reduce
-    # it across devices at every iteration: a collective per step, which deadlocks host
-    # devices on a small machine)
+    # `jit` with sharding annotations alone, a loop whose predicate is batched may be
+    # reduced across devices at every iteration: a collective per step)
     spec = PartitionSpec(mesh.axis_names)
     return jax.jit(
         jax.shard_map(batched, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
