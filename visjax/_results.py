@@ -61,6 +61,10 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "The estimator's gains or constants break an assumption of its paper (a gain that "
         "must be positive, a bound that must be ordered, a matrix that must be Hurwitz)."
     )
+    singular_configuration = (
+        "The robot's velocity Jacobian (Jang's thesis, eq. (4.4)) is singular or nearly so "
+        "at these joint angles: the inverse velocity kinematics (4.6) does not exist there."
+    )
     unstable_step = (
         "The integration step exceeds the Euler stability bound that the estimator "
         "declares for its gains (`max_stable_dt`): the run would diverge. Use a smaller "
