@@ -68,6 +68,21 @@ def _check_out(out) -> None:
         raise argparse.ArgumentTypeError(f"--out {out!r}: {str(parent)!r} is not writable")
 
 
+def _check_out_file(out) -> None:
+    """`--out` of `track` must be a `.npz` or `.csv` file that can be written (not a folder),
+    checked before any work."""
+    path = Path(out)
+    if path.suffix.lower() not in (".npz", ".csv"):
+        raise argparse.ArgumentTypeError(f"--out {out!r} must end in .npz or .csv")
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"--out {out!r} is a folder, not a file")
+    parent = path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"--out {out!r}: {str(parent)!r} is not writable")
+
+
 def _run_geometry(a):
     return report.geometry_report(a.scenes, a.points, a.noise, a.seed, a.out)
 
@@ -173,6 +188,18 @@ def _add_study_options(parser, seeds: int) -> None:
     )
     parser.add_argument("--out", type=str, default=None, help="directory for the outputs")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _run_track(a):
+    return report.track_report(
+        a.video,
+        a.out,
+        detector=a.detector,
+        max_features=a.max_features,
+        fb_threshold=a.fb_threshold,
+        fps=a.fps,
+        quiet=a.quiet,
+    )
 
 
 def _run_reproduce(a):
@@ -303,6 +330,30 @@ def build_parser() -> argparse.ArgumentParser:
     )
     tu.set_defaults(func=_run_tune)
 
+    tr = sub.add_parser(
+        "track",
+        help="a video to pixel tracks: KLT with a forward-backward check (thesis sec. 2.4)",
+    )
+    tr.add_argument("video", help="the video (MP4 or anything OpenCV reads, or .npz)")
+    tr.add_argument(
+        "--out",
+        required=True,
+        help="the tracks file: .npz (keys t and pixels, NaN where not seen) or .csv",
+    )
+    tr.add_argument("--detector", choices=("corners", "aruco"), default="corners")
+    tr.add_argument(
+        "--max-features", type=_count, default=200, help="features alive at once (default 200)"
+    )
+    tr.add_argument(
+        "--fb-threshold",
+        type=_positive,
+        default=0.5,
+        help="forward-backward round-trip error in px that drops a feature (default 0.5)",
+    )
+    tr.add_argument("--fps", type=_positive, default=None, help="frame rate (default: the video's)")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    tr.set_defaults(func=_run_track, out_is_file=True)
+
     r = sub.add_parser("reproduce", help="every paper's main experiment, figures and a summary")
     r.add_argument("--quick", action="store_true", help="smaller geometry batch")
     r.add_argument("--out", type=str, default="results", help="output directory (default results)")
@@ -340,9 +391,14 @@ def main(argv=None) -> int:
     if args.command == "compare" and args.data is not None and args.duration is not None:
         parser.error("--duration applies to the paper's scenario, not to --data")
     try:
-        _check_out(args.out)
+        if getattr(args, "out_is_file", False):
+            _check_out_file(args.out)
+        else:
+            _check_out(args.out)
     except argparse.ArgumentTypeError as e:
         parser.error(str(e))
+    if args.command == "track" and not Path(args.video).is_file():
+        parser.error(f"video {args.video!r}: no such file")
     data = getattr(args, "data", None)
     if data is not None and not Path(data).is_file():
         parser.error(f"--data {data!r}: no such file")
@@ -366,6 +422,13 @@ def _execute(args) -> int:
     staging = Path(tempfile.mkdtemp(prefix=".visjax-", dir=anchor))
     stdout = sys.stdout
     try:
+        if getattr(args, "out_is_file", False):  # one file: staged, then moved into place
+            args.out = str(staging / final.name)
+            sys.stdout = _Renaming(stdout, args.out, str(final))
+            args.func(args)
+            final.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(staging / final.name, final)
+            return 0
         args.out = str(staging)
         sys.stdout = _Renaming(stdout, str(staging), str(final))  # print the final paths
         args.func(args)

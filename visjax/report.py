@@ -968,6 +968,71 @@ def tune_report(
     return results if problem == "structure" else results[None]
 
 
+def track_report(
+    video,
+    out,
+    *,
+    detector: str = "corners",
+    max_features: int = 200,
+    fb_threshold=0.5,
+    fps=None,
+    quiet: bool = False,
+) -> dict:
+    """Jang's thesis, sections 2.4 and 5.1: a video to pixel tracks by pyramidal KLT with a
+    forward-backward check (`visjax.frontend.track_frames`).
+
+    **Arguments:** `video` a file `visjax.frontend.read_video` reads (MP4 or `.npz`);
+    `out` the tracks file: `.npz` with exactly the keys `t` (N,) seconds and `pixels`
+    (N, n, 2), NaN where a feature is not seen (the convention of
+    `visjax.io.load_tracks_csv`), or `.csv` written by `visjax.io.save_tracks_csv`;
+    `detector`, `max_features`, `fb_threshold` as in `track_frames`; `fps` overrides the
+    video's frame rate; `quiet` no progress bar and no summary line.
+
+    **Returns:** the summary: frames, features, features in frame 0, fraction tracked.
+    Raises `ValueError` (nothing written) when the detector finds no feature at all.
+    """
+    from .frontend import read_video, track_frames
+    from .io import save_tracks_csv
+
+    out = Path(out)
+    if out.suffix.lower() not in (".npz", ".csv"):
+        raise ValueError(f"{out}: the tracks file must end in .npz or .csv.")
+    frames, video_fps = read_video(video)
+    rate = video_fps if fps is None else fps
+    if not (rate is not None and math.isfinite(rate) and rate > 0):
+        raise ValueError(f"{video}: the video does not state its frame rate; give --fps.")
+    tracks = track_frames(
+        frames,
+        fps=rate,
+        detector=detector,
+        max_features=max_features,
+        fb_threshold=fb_threshold,
+        progress=not quiet,
+    )
+    if tracks.pixels.shape[1] == 0:
+        raise ValueError(f"{video}: the {detector!r} detector found no feature to track.")
+    if out.suffix.lower() == ".csv":
+        save_tracks_csv(out, tracks.t, tracks.pixels)
+    else:
+        with out.open("wb") as f:
+            np.savez(f, t=tracks.t, pixels=tracks.pixels)
+    summary = {
+        "frames": int(frames.shape[0]),
+        "fps": float(rate),
+        "features": int(tracks.pixels.shape[1]),
+        "features_frame0": int(np.sum(tracks.born == 0)),
+        "fraction_tracked": tracks.fraction_tracked,
+    }
+    if not quiet:
+        print(
+            f"tracked {summary['frames']} frames at {rate:g} Hz: {summary['features']} features "
+            f"({summary['features_frame0']} in frame 0), "
+            f"{summary['fraction_tracked']:.1%} of feature-frames since detection tracked; "
+            f"wrote {out}"
+        )
+    return summary
+
+
 def reproduce(out="results", quick: bool = False, quiet: bool = False) -> dict:
     """Every paper's main experiment into one folder, then a summary table."""
     out = Path(out)

@@ -1,4 +1,15 @@
-"""Pixels from images: KLT tracking and synthetic rendering (NumPy and OpenCV, not jit)."""
+"""Pixels from images: KLT tracking, video files and synthetic rendering (NumPy and OpenCV,
+imported lazily; never jit)."""
 
 from ._klt import klt_track as klt_track, klt_translation as klt_translation
 from ._render import render_marker as render_marker
+from ._scene_render import (
+    Plane as Plane,
+    fiducial_marker as fiducial_marker,
+    plane_homography as plane_homography,
+    project_points as project_points,
+    render_planes as render_planes,
+    textured_table as textured_table,
+)
+from ._tracking import Tracks as Tracks, detect_aruco as detect_aruco, track_frames as track_frames
+from ._video import read_video as read_video, write_video as write_video

@@ -1,0 +1,282 @@
+"""Frames to pixel tracks (Jang's thesis, section 2.4; section 5.1 tracks a fiducial marker
+with OpenCV's KLT at 30 Hz): detection, pyramidal KLT with a forward-backward check, and
+re-detection. NumPy and OpenCV, never jit."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._scene_render import _ARUCO_DICTIONARY, _aruco_dictionary
+from ._video import _check_fps, check_frames
+
+
+@dataclass(frozen=True)
+class Tracks:
+    """Pixel tracks of features through a sequence of frames.
+
+    **Fields:**
+
+    - `t`: (N,) seconds, frame index / fps.
+    - `pixels`: (N, n, 2) float pixels $(u, v)$ (OpenCV's convention, pixel centres at
+      integers); NaN where the feature was not tracked in that frame: before it was
+      detected and from the frame it was lost on (a lost feature is never revived).
+    - `born`: (n,) int, the frame in which each feature was detected.
+    - `marker_id`: (n,) int, the ArUco id of a `detector="aruco"` feature, else -1.
+    - `corner`: (n,) int, for an ArUco feature 0-3 its corner (top-left, top-right,
+      bottom-right, bottom-left) or 4 its centre; else -1.
+    - `fps`: frames per second.
+
+    The same pixel-track convention as `visjax.io.load_tracks_csv`.
+    """
+
+    t: np.ndarray
+    pixels: np.ndarray
+    born: np.ndarray
+    marker_id: np.ndarray
+    corner: np.ndarray
+    fps: float
+
+    @property
+    def alive(self) -> np.ndarray:
+        """(N, n) bool: tracked in that frame."""
+        return np.all(np.isfinite(self.pixels), axis=-1)
+
+    @property
+    def fraction_tracked(self) -> float:
+        """Tracked (frame, feature) pairs over those from each feature's birth on."""
+        n_frames = self.pixels.shape[0]
+        possible = int(np.sum(n_frames - self.born))
+        return float(self.alive.sum() / possible) if possible else 0.0
+
+
+def detect_aruco(image, *, dictionary: str = _ARUCO_DICTIONARY):
+    """ArUco markers in an image, with sub-pixel corners.
+
+    **Arguments:** `image` (H, W) uint8; `dictionary` a `cv2.aruco` predefined dictionary.
+
+    **Returns:** `(ids (m,) int, corners (m, 4, 2) float)`, sorted by id; corners top-left,
+    top-right, bottom-right, bottom-left of the marker's black square, refined with
+    `cv2.aruco.CORNER_REFINE_SUBPIX`.
+    """
+    import cv2
+
+    image = check_frames(np.asarray(image)[None], "image")[0]
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    params.cornerRefinementMinAccuracy = 0.01
+    params.cornerRefinementMaxIterations = 50
+    detector = cv2.aruco.ArucoDetector(_aruco_dictionary(dictionary), params)
+    corners, ids, _ = detector.detectMarkers(image)
+    if ids is None or len(ids) == 0:
+        return np.zeros(0, int), np.zeros((0, 4, 2))
+    ids = np.asarray(ids, int).reshape(-1)
+    corners = np.stack([np.asarray(c, float).reshape(4, 2) for c in corners])
+    order = np.argsort(ids, kind="stable")
+    return ids[order], corners[order]
+
+
+def _quad_centre(c):
+    """The intersection of a quadrilateral's diagonals: the image of a square's centre."""
+    l1 = np.cross([*c[0], 1.0], [*c[2], 1.0])
+    l2 = np.cross([*c[1], 1.0], [*c[3], 1.0])
+    x = np.cross(l1, l2)
+    return x[:2] / x[2] if abs(x[2]) > 1e-12 else c.mean(axis=0)
+
+
+def _far_from(candidates, alive, min_distance):
+    if len(alive) == 0 or len(candidates) == 0:
+        return np.ones(len(candidates), bool)
+    d = np.linalg.norm(candidates[:, None, :] - alive[None, :, :], axis=-1)
+    return d.min(axis=1) >= min_distance
+
+
+def _detect(image, alive_px, budget, detector, quality, min_distance, dictionary):
+    """New features (pixels (m, 2), marker ids (m,), corner indices (m,)) at least
+    `min_distance` from `alive_px`, at most `budget` of them."""
+    import cv2
+
+    empty = np.zeros((0, 2)), np.zeros(0, int), np.zeros(0, int)
+    if budget <= 0:
+        return empty
+    if detector == "aruco":
+        ids, corners = detect_aruco(image, dictionary=dictionary)
+        px, mid, cid = [], [], []
+        for i, c in zip(ids, corners, strict=True):
+            px.extend([*c, _quad_centre(c)])
+            mid.extend([i] * 5)
+            cid.extend(range(5))
+        if not px:
+            return empty
+        px, mid, cid = np.array(px), np.array(mid, int), np.array(cid, int)
+        keep = _far_from(px, alive_px, min_distance)
+        return px[keep][:budget], mid[keep][:budget], cid[keep][:budget]
+    mask = np.full(image.shape, 255, np.uint8)
+    for u, v in alive_px:
+        cv2.circle(mask, (int(round(u)), int(round(v))), int(np.ceil(min_distance)), 0, -1)
+    found = cv2.goodFeaturesToTrack(
+        image,
+        maxCorners=int(budget),
+        qualityLevel=float(quality),
+        minDistance=float(min_distance),
+        mask=mask,
+        blockSize=7,
+    )
+    if found is None or len(found) == 0:
+        return empty
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 40, 1e-3)
+    found = cv2.cornerSubPix(image, found.astype(np.float32), (5, 5), (-1, -1), criteria)
+    px = found.reshape(-1, 2).astype(float)
+    px = px[_far_from(px, alive_px, min_distance)]
+    m = len(px)
+    return px, np.full(m, -1), np.full(m, -1)
+
+
+def track_frames(
+    frames,
+    *,
+    fps=30.0,
+    points=None,
+    detector: str = "corners",
+    max_features: int = 200,
+    quality=0.01,
+    min_distance=8.0,
+    win: int = 21,
+    levels: int = 3,
+    fb_threshold=0.5,
+    max_residual=15.0,
+    redetect_below: int | None = None,
+    aruco_dictionary: str = _ARUCO_DICTIONARY,
+    progress: bool = False,
+) -> Tracks:
+    """Track features through grey frames with pyramidal KLT and a forward-backward check.
+
+    **Arguments:**
+
+    - `frames`: (N, H, W) uint8.
+    - `fps`: frames per second (the times `t` = frame index / fps).
+    - `points`: (n, 2) pixels to track from frame 0; default: detect them.
+    - `detector`: `"corners"` (`cv2.goodFeaturesToTrack`, refined by `cv2.cornerSubPix`)
+      or `"aruco"` (the four corners and the centre of each ArUco marker of
+      `aruco_dictionary`, see `detect_aruco`); also used to re-detect.
+    - `max_features`: the most features alive at once.
+    - `quality`, `min_distance`: `goodFeaturesToTrack`'s quality level and the least
+      distance in pixels between features (also between new and alive ones).
+    - `win`, `levels`: the KLT window (pixels) and the pyramid levels.
+    - `fb_threshold`: pixels; a feature whose forward-backward round trip misses its
+      start by more than this is dropped.
+    - `max_residual`: grey levels; a feature whose forward match leaves a mean absolute
+      difference between the two windows above this is dropped (`calcOpticalFlowPyrLK`'s
+      `err`). It catches the rare occluded feature whose false match is consistent both
+      ways; `np.inf` turns it off.
+    - `redetect_below`: detect new features when fewer than this are alive; default
+      `max_features // 2` when detecting, 0 (never) with `points`.
+    - `progress`: a tqdm progress bar over frames.
+
+    **Returns:** a `Tracks`.
+
+    Each step tracks frame k-1 to k with `cv2.calcOpticalFlowPyrLK`, then back from k to
+    k-1; a feature is dropped (NaN from frame k on, never revived) when either pass fails
+    (status 0), the round-trip error exceeds `fb_threshold`, the forward residual exceeds
+    `max_residual`, or its position leaves the
+    image ($0 \\le u \\le W - 1$, $0 \\le v \\le H - 1$). A re-detected feature gets a new
+    column, NaN in the frames before its detection.
+    """
+    import cv2
+
+    frames = check_frames(frames)
+    fps = _check_fps(fps)
+    if detector not in ("corners", "aruco"):
+        raise ValueError(f"`detector` must be 'corners' or 'aruco'; got {detector!r}.")
+    if int(max_features) < 1:
+        raise ValueError(f"`max_features` must be positive; got {max_features}.")
+    if not (np.isfinite(fb_threshold) or fb_threshold == np.inf) or fb_threshold <= 0:
+        raise ValueError(f"`fb_threshold` must be a positive number; got {fb_threshold}.")
+    if not max_residual > 0:
+        raise ValueError(f"`max_residual` must be a positive number; got {max_residual}.")
+    if not (0 < quality < 1) or not min_distance >= 0:
+        raise ValueError("`quality` must be in (0, 1) and `min_distance` non-negative.")
+    if int(win) < 3 or int(levels) < 0:
+        raise ValueError(f"`win` must be >= 3 and `levels` >= 0; got {win}, {levels}.")
+    if redetect_below is None:
+        redetect_below = 0 if points is not None else int(max_features) // 2
+    n_frames, h, w = frames.shape
+
+    if points is not None:
+        px0 = np.asarray(points, float)
+        if px0.ndim != 2 or px0.shape[1] != 2 or not np.all(np.isfinite(px0)):
+            raise ValueError(f"`points` must be finite (n, 2) pixels; got {px0.shape}.")
+        mid0 = cid0 = np.full(len(px0), -1)
+    else:
+        px0, mid0, cid0 = _detect(
+            frames[0],
+            np.zeros((0, 2)),
+            int(max_features),
+            detector,
+            quality,
+            min_distance,
+            aruco_dictionary,
+        )
+    columns = [np.full((n_frames, 2), np.nan) for _ in range(len(px0))]
+    for col, p in zip(columns, px0, strict=True):
+        col[0] = p
+    born = [0] * len(px0)
+    marker_id, corner = list(mid0), list(cid0)
+    alive = list(range(len(px0)))  # column indices
+
+    lk = dict(
+        winSize=(int(win), int(win)),
+        maxLevel=int(levels),
+        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-3),
+    )
+    from tqdm import tqdm
+
+    for k in tqdm(range(1, n_frames), desc="track", unit="frame", disable=not progress):
+        if alive:
+            p0 = np.array([columns[j][k - 1] for j in alive], np.float32).reshape(-1, 1, 2)
+            p1, st1, residual = cv2.calcOpticalFlowPyrLK(frames[k - 1], frames[k], p0, None, **lk)
+            p0r, st2, _ = cv2.calcOpticalFlowPyrLK(frames[k], frames[k - 1], p1, None, **lk)
+            p1 = p1.reshape(-1, 2).astype(float)
+            fb = np.linalg.norm(p0r.reshape(-1, 2) - p0.reshape(-1, 2), axis=1)
+            ok = (
+                (st1.ravel() == 1)
+                & (st2.ravel() == 1)
+                & (fb <= fb_threshold)
+                & (residual.ravel() <= max_residual)
+                & np.all(np.isfinite(p1), axis=1)
+                & (p1[:, 0] >= 0)
+                & (p1[:, 0] <= w - 1)
+                & (p1[:, 1] >= 0)
+                & (p1[:, 1] <= h - 1)
+            )
+            for j, p, good in zip(alive, p1, ok, strict=True):
+                if good:
+                    columns[j][k] = p
+            alive = [j for j, good in zip(alive, ok, strict=True) if good]
+        if len(alive) < redetect_below:
+            alive_px = np.array([columns[j][k] for j in alive]).reshape(-1, 2)
+            new, mid, cid = _detect(
+                frames[k],
+                alive_px,
+                int(max_features) - len(alive),
+                detector,
+                quality,
+                min_distance,
+                aruco_dictionary,
+            )
+            for p, m, c in zip(new, mid, cid, strict=True):
+                col = np.full((n_frames, 2), np.nan)
+                col[k] = p
+                alive.append(len(columns))
+                columns.append(col)
+                born.append(k)
+                marker_id.append(m)
+                corner.append(c)
+    pixels = np.stack(columns, axis=1) if columns else np.zeros((n_frames, 0, 2))
+    return Tracks(
+        t=np.arange(n_frames) / fps,
+        pixels=pixels,
+        born=np.array(born, int),
+        marker_id=np.array(marker_id, int),
+        corner=np.array(corner, int),
+        fps=fps,
+    )

@@ -1,0 +1,101 @@
+"""Grey video files in and out: MP4 through OpenCV, or a lossless NPZ (never jit)."""
+
+from pathlib import Path
+
+import numpy as np
+
+
+def check_frames(frames, name: str = "frames") -> np.ndarray:
+    """`frames` as an (N, H, W) uint8 array with N >= 1, or a `ValueError` naming it."""
+    arr = np.asarray(frames)
+    if arr.ndim != 3 or arr.dtype != np.uint8 or min(arr.shape) < 1:
+        raise ValueError(
+            f"`{name}` must be (N, H, W) uint8 grey frames with N >= 1; "
+            f"got shape {arr.shape} dtype {arr.dtype}."
+        )
+    return arr
+
+
+def _check_fps(fps) -> float:
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        raise ValueError(f"`fps` must be a positive number; got {fps!r}.") from None
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"`fps` must be a positive number; got {fps!r}.")
+    return value
+
+
+def write_video(path, frames, fps) -> Path:
+    """Write grey frames as a video.
+
+    **Arguments:** `path` ending in `.npz` (lossless: keys `frames` and `fps`) or anything
+    else (MP4, the `mp4v` fourcc, lossy); `frames` (N, H, W) uint8; `fps` frames per second.
+
+    **Returns:** the path written. Raises `ValueError` on bad frames or fps, and
+    `OSError` when OpenCV cannot open the file for writing (a missing folder, no encoder).
+    """
+    frames = check_frames(frames)
+    fps = _check_fps(fps)
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        with path.open("wb") as f:
+            np.savez(f, frames=frames, fps=np.float64(fps))
+        return path
+    import cv2
+
+    n, h, w = frames.shape
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h), False)
+    if not writer.isOpened():
+        raise OSError(f"{path}: OpenCV could not open an mp4v video for writing.")
+    try:
+        for frame in frames:
+            writer.write(np.ascontiguousarray(frame))
+    finally:
+        writer.release()
+    return path
+
+
+def read_video(path) -> tuple[np.ndarray, float]:
+    """Read a video as grey frames.
+
+    **Arguments:** `path`: a video OpenCV can decode (`cv2.VideoCapture`; colour frames are
+    converted to grey with `cv2.COLOR_BGR2GRAY`), or an `.npz` with keys `frames` (N, H, W)
+    uint8 and `fps`.
+
+    **Returns:** `(frames (N, H, W) uint8, fps)`; `fps` is NaN when the container does not
+    state it. Raises `FileNotFoundError` for a missing file and `ValueError` for a file
+    that is not a readable video (or an NPZ without the keys, or with no frames).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such video file.")
+    if path.suffix.lower() == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if "frames" not in data or "fps" not in data:
+                    raise ValueError(f"{path}: expected the keys 'frames' and 'fps'.")
+                frames, fps = data["frames"], float(data["fps"])
+        except (OSError, EOFError) as e:
+            raise ValueError(f"{path}: not a readable NPZ ({e}).") from None
+        return check_frames(frames, f"{path.name}['frames']"), _check_fps(fps)
+    import cv2
+
+    capture = cv2.VideoCapture(str(path))
+    frames = []
+    try:
+        if not capture.isOpened():
+            raise ValueError(f"{path}: OpenCV cannot open it as a video.")
+        fps = float(capture.get(cv2.CAP_PROP_FPS))
+        while True:
+            ok, frame = capture.read()
+            if not ok:
+                break
+            if frame.ndim == 3:
+                frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+            frames.append(frame)
+    finally:
+        capture.release()
+    if not frames:
+        raise ValueError(f"{path}: no frame could be decoded.")
+    return np.stack(frames).astype(np.uint8), fps if np.isfinite(fps) and fps > 0 else np.nan
