@@ -202,6 +202,27 @@ def _run_track(a):
     )
 
 
+def _set_name(text: str) -> str:
+    from .papers.jang import SETS
+
+    if text not in SETS:
+        raise argparse.ArgumentTypeError(f"unknown set {text!r}; choose from {', '.join(SETS)}")
+    return text
+
+
+def _run_testbed(a):
+    return report.testbed_report(
+        a.set,
+        a.units,
+        a.duration,
+        seed=a.seed,
+        video=not a.no_video,
+        studies=not a.no_studies,
+        out=a.out,
+        quiet=a.quiet,
+    )
+
+
 def _run_reproduce(a):
     return report.reproduce(a.out, quick=a.quick, quiet=a.quiet)
 
@@ -353,6 +374,33 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--fps", type=_positive, default=None, help="frame rate (default: the video's)")
     tr.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     tr.set_defaults(func=_run_track, out_is_file=True)
+
+    tb = sub.add_parser(
+        "testbed",
+        help="Jang's thesis end to end on a twin of its testbed: PUMA 560 and two-link "
+        "kinematics, rendered 30 Hz video, KLT tracking, encoder velocities, the UIO",
+    )
+    tb.add_argument(
+        "--set", action="append", type=_set_name, help="I.1 ... II.3 (repeatable; default: all)"
+    )
+    tb.add_argument(
+        "--units",
+        choices=("cm", "m"),
+        default="cm",
+        help="the unit of the velocities in the thesis' A matrices (the thesis does not say; "
+        "default cm)",
+    )
+    tb.add_argument("--duration", type=_positive, default=30.0, help="seconds per set (default 30)")
+    tb.add_argument("--seed", type=_seed, default=0, help="the table texture's seed (default 0)")
+    tb.add_argument("--no-video", action="store_true", help="no MP4 of the rendered frames")
+    tb.add_argument(
+        "--no-studies",
+        action="store_true",
+        help="skip the least-squares camera matrix (Tables 5-1/5-2) and the v_py sensitivity",
+    )
+    tb.add_argument("--out", type=str, default=None, help="directory for tables, figures, videos")
+    tb.add_argument("--quiet", action="store_true", help="no progress bars")
+    tb.set_defaults(func=_run_testbed)
 
     r = sub.add_parser("reproduce", help="every paper's main experiment, figures and a summary")
     r.add_argument("--quick", action="store_true", help="smaller geometry batch")

@@ -100,6 +100,67 @@ def plot_structure(ts, position, estimate, *, title=None, path=None):
     return _finish(fig, title, path)
 
 
+def plot_testbed(run, *, title=None, path=None):
+    """Like Figs. 5-5 to 5-8 of Jang's thesis for one set on the testbed twin: the camera's
+    angular and linear velocities (from the encoders, solid; commanded, dashed), the
+    marker's actual (dashed, drawn on top) and estimated (solid) position in the camera
+    frame, and the estimation error (from tracked pixels; from exact pixels, thin)."""
+    plt = _pyplot(path)
+    ft = np.asarray(run.frame_ts)
+    ts = np.asarray(run.ts)
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+    names = ("x", "y", "z")
+    for i in range(3):
+        axes[0, 0].plot(
+            ft,
+            run.velocity_measured[:, 3 + i],
+            f"C{i}-",
+            lw=1.0,
+            label=f"$\\omega_{names[i]}$ (encoders)",
+        )
+        axes[0, 0].plot(ft, run.velocity_true[:, 3 + i], f"C{i}--", lw=1.0)
+        axes[0, 1].plot(
+            ft,
+            run.velocity_measured[:, i],
+            f"C{i}-",
+            lw=1.0,
+            label=f"$v_{{c{names[i]}}}$ (encoders)",
+        )
+        axes[0, 1].plot(ft, run.velocity_true[:, i], f"C{i}--", lw=1.0)
+    axes[0, 0].set_title("camera angular velocity (Fig. 5-5)")
+    axes[0, 0].set_ylabel("rad/s")
+    axes[0, 1].set_title("camera linear velocity (Fig. 5-6)")
+    axes[0, 1].set_ylabel("m/s")
+    m = run.estimate.shape[0]
+    for i in range(3):
+        axes[1, 0].plot(
+            ts[:m], run.estimate[:, i], f"C{i}-", lw=1.0, label=f"{names[i].upper()} estimated"
+        )
+        axes[1, 0].plot(ts[:m], run.position[:m, i], "k--", lw=1.0, zorder=5)
+        axes[1, 1].plot(
+            ts[:m],
+            run.estimate[:, i] - run.position[:m, i],
+            f"C{i}-",
+            lw=1.0,
+            label=f"{names[i].upper()} (tracked pixels)",
+        )
+        axes[1, 1].plot(ts[:m], run.estimate_ideal[:, i] - run.position[:m, i], f"C{i}:", lw=0.8)
+    axes[1, 0].set_title("actual (dashed) and estimated (solid) position (Fig. 5-7)")
+    axes[1, 0].set_ylabel("m")
+    axes[1, 1].set_title("estimation error (Fig. 5-8); dotted: exact pixels")
+    axes[1, 1].set_ylabel("m")
+    half = ts[:m] >= ts[m - 1] / 2
+    err = run.estimate[half] - run.position[:m][half]
+    if np.isfinite(err).any():
+        lim = 4 * max(float(np.nanmax(np.abs(err))), 1e-4)
+        axes[1, 1].set_ylim(-lim, lim)
+    for ax in axes.ravel():
+        ax.legend(fontsize=7, loc="upper right", framealpha=0.6)
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    return _finish(fig, title, path)
+
+
 def plot_euclidean(run, *, title=None, path=None):
     """Seed 004: each unknown feature's estimated world coordinates against the truth, the
     prediction errors of both laws (log scale), and the PE measure of eq. (49)."""

@@ -27,15 +27,21 @@ def _check_fps(fps) -> float:
 
 
 def write_video(path, frames, fps) -> Path:
-    """Write grey frames as a video.
+    """Write grey (or BGR colour) frames as a video.
 
     **Arguments:** `path` ending in `.npz` (lossless: keys `frames` and `fps`) or anything
-    else (MP4, the `mp4v` fourcc, lossy); `frames` (N, H, W) uint8; `fps` frames per second.
+    else (MP4, the `mp4v` fourcc, lossy); `frames` (N, H, W) uint8 grey, or (N, H, W, 3)
+    uint8 BGR colour; `fps` frames per second.
 
     **Returns:** the path written. Raises `ValueError` on bad frames or fps, and
     `OSError` when OpenCV cannot open the file for writing (a missing folder, no encoder).
     """
-    frames = check_frames(frames)
+    colour = np.ndim(frames) == 4 and np.shape(frames)[-1] == 3
+    if colour:  # BGR frames (N, H, W, 3), e.g. grey frames with overlays drawn in colour
+        frames = np.asarray(frames)
+        check_frames(frames[..., 0])
+    else:
+        frames = check_frames(frames)
     fps = _check_fps(fps)
     path = Path(path)
     if path.suffix.lower() == ".npz":
@@ -44,8 +50,8 @@ def write_video(path, frames, fps) -> Path:
         return path
     import cv2
 
-    n, h, w = frames.shape
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h), False)
+    n, h, w = frames.shape[:3]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h), colour)
     if not writer.isOpened():
         raise OSError(f"{path}: OpenCV could not open an mp4v video for writing.")
     try:

@@ -10,6 +10,7 @@ from ._rigid import integrate_pose as integrate_pose
 from ._serial import (
     PUMA560_TABLE as PUMA560_TABLE,
     InverseVelocity as InverseVelocity,
+    PoseSolution as PoseSolution,
     SerialChain as SerialChain,
     TwoLinkArm as TwoLinkArm,
     link_transform as link_transform,

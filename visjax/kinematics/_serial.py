@@ -25,6 +25,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, all_finite, raise_or_keep
 from .._util import as_float, check_shape
+from ..geometry import so3_log
 
 
 def link_transform(a, alpha, S, theta) -> Float[Array, "4 4"]:
@@ -70,6 +71,18 @@ class InverseVelocity(eqx.Module):
 
     qdot: Float[Array, " n"]
     sigma_min: Float[Array, ""]
+    result: RESULTS
+
+
+@final
+class PoseSolution(eqx.Module):
+    """What `SerialChain.solve_pose` returns: the joint angles `q` (n,), the final pose
+    error `residual` (the norm of the position error in m plus the rotation angle in rad),
+    and a `result` (`singular_configuration` where the Newton step met a singular Jacobian,
+    `nonfinite_output`, or `max_steps_reached` when the error stayed above the tolerance)."""
+
+    q: Float[Array, " n"]
+    residual: Float[Array, ""]
     result: RESULTS
 
 
@@ -227,6 +240,53 @@ class SerialChain(eqx.Module):
         )
         out = InverseVelocity(qdot=qdot, sigma_min=sigma_min, result=result)
         return raise_or_keep(result, out, throw)
+
+    def solve_pose(
+        self,
+        R_target: Float[ArrayLike, "3 3"],
+        p_target: Float[ArrayLike, "3"],
+        q_guess: Float[ArrayLike, " n"],
+        *,
+        steps: int = 40,
+        tol: float = 1e-10,
+        throw: bool = True,
+    ) -> PoseSolution:
+        """Joint angles that put the tool at a pose, by Newton's method on eq. (4.6).
+
+        Each step commands the tool twist that would remove the pose error in unit time,
+        $[p^* - p(q);\\ \\log(R^* R(q)^T)]$ (in $F$), and adds the joint rates of (4.6). The
+        solution is the one the iteration reaches from `q_guess` (a serial arm has several
+        inverse solutions; the thesis uses the forward and velocity analyses only).
+
+        **Arguments:** `R_target` (3, 3), `p_target` (3,): the tool frame's orientation and
+        tool point in $F$; `q_guess` (n,); `steps` Newton steps; `tol` the accepted residual.
+
+        **Returns:** a `PoseSolution`.
+        """
+        R_target, p_target = as_float(R_target), as_float(p_target)
+        check_shape(R_target, (3, 3), "R_target")
+        check_shape(p_target, (3,), "p_target")
+        q = self._q(q_guess, "q_guess")
+
+        def error(q):
+            R, p = self.tool_pose(q)
+            return jnp.concatenate([p_target - p, so3_log(R_target @ R.T)])
+
+        def step(carry, _):
+            q, result = carry
+            out = self.inverse_velocity(q, error(q), throw=False)
+            ok = out.result == RESULTS.successful
+            q = jnp.where(ok & (result == RESULTS.successful), q + out.qdot, q)
+            result = RESULTS.where(result == RESULTS.successful, out.result, result)
+            return (q, result), None
+
+        (q, result), _ = jax.lax.scan(step, (q, RESULTS.successful), None, length=steps)
+        e = error(q)
+        residual = jnp.linalg.norm(e[:3]) + jnp.linalg.norm(e[3:])
+        result = RESULTS.where(
+            (result == RESULTS.successful) & ~(residual <= tol), RESULTS.max_steps_reached, result
+        )
+        return raise_or_keep(result, PoseSolution(q=q, residual=residual, result=result), throw)
 
 
 _CM = 0.01

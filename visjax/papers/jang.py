@@ -45,6 +45,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from .._results import RESULTS, result_names
 from ..estimators import (
     SaveAt,
     Stream,
@@ -310,3 +311,361 @@ def structure_experiment(
     return StructureRun(
         ts=sol.ts, position=truth, estimate=estimate, rms=jnp.sqrt(jnp.mean(err**2, axis=0))
     )
+
+
+# --------------------------------------------------------------------------------------
+# The testbed as a digital twin (chapters 4-5): a camera on a PUMA 560, a fiducial marker
+# on the table (Experiment I) or on a two-link planar robot (Experiment II), frames
+# rendered at 30 Hz and tracked by KLT, camera velocities from the PUMA's joint encoders,
+# ground truth from both robots' forward kinematics at 1 kHz.
+
+TESTBED = {
+    # Every number here is an assumption: the thesis states none of them (its words:
+    # "A camera is rigidly fixed to the end-effector of the PUMA 560. The PUMA and the
+    # two-link robot are rigidly attached to a worktable", section 5.1).
+    "table_z": -0.60,  # m: the table top in the PUMA's frame F (origin at the shoulder)
+    "camera_height": 0.80,  # m above the table at mid-run (the 80 cm depth of `scenario`)
+    "camera_mid_xy": (0.50, 0.10),  # m: the camera's position in F at mid-run
+    "q_guess": (-0.10, 0.30, -0.08, 0.0, 2.92, 3.04),  # rad: a downward-looking posture
+    "tool": (0.0, 0.0, 0.10),  # m: the camera's centre in frame 6, 10 cm out along S6
+    "marker_side": 0.06,  # m: the black square of the ArUco marker
+    "marker_height": 0.02,  # m above the table, on the two-link robot (Experiment II)
+    "two_link_lengths": (0.35, 0.25),  # m
+    "two_link_reach_at_mid": 0.42,  # m: distance base -> marker at mid-run (elbow bent)
+    "encoder_resolution": 2 * np.pi / 2**18,  # rad per count at the joint (2.4e-5 rad)
+    "velocity_delay_s": 0.0,  # serial link delay of the velocities (not stated)
+    "image_size": (640, 480),  # the mvBlueFox-120a's VGA frames
+    "supersample": 2,  # rendering's anti-aliasing (2 x 2 samples per pixel)
+}
+"""The twin's layout and sensors. A camera velocity sent at a frame is the mean over the
+preceding camera period (the backward difference of the quantised encoder angles over
+1/30 s, through eq. (4.5)): an effective delay of half a period (16.7 ms), plus
+`velocity_delay_s`."""
+
+UNITS = {"cm": 0.01, "m": 1.0}
+"""The two readings of the thesis' $A$: its velocity entries in cm/s or in m/s (the thesis
+never states the unit; the PUMA's Table 4-1 is in cm). The value converts to m/s."""
+
+
+@dataclass(frozen=True)
+class TestbedRun:
+    """One experiment set on the twin (NumPy arrays; positions in metres, camera frame).
+
+    **Fields:**
+
+    - `set_name`, `units` (`"cm"` or `"m"`), `duration`, `feasible` (False when the PUMA
+      cannot follow the set's camera velocities: `reason` says why and when).
+    - `ts` (N,) 1 kHz; `position` (N, 3) the truth $R_{cam}^{-1}(r_{obj} - r_{cam})$ from
+      forward kinematics; `estimate` (N, 3) the UIO from tracked pixels; `estimate_ideal`
+      (N, 3) the UIO from the exact projections of the marker's centre.
+    - `frame_ts` (F,); `frame_index` (F,) their 1 kHz samples; `pixels` (F, 2) the tracked
+      marker centre (NaN where lost); `pixels_true` (F, 2) its exact projection;
+      `velocity_true` (F, 6), `velocity_measured` (F, 6): the camera's $[v_c, \\omega]$
+      (m/s, rad/s, camera frame), exact and from the encoders.
+    - `q_puma` (N, 6), `q_arm` (N, 2) or `None`: the robots' joint angles.
+    - `rms` (3,) the RMS error over the second half at 1 kHz; `rms_frames` (3,) at the
+      camera samples only; `rms_ideal` (3,) at 1 kHz from ideal pixels; `tracking_rms_px`
+      the tracked centre's RMS distance to its projection (px).
+    - `result` the UIO's result name; `frames` (F, H, W) uint8 when kept, else `None`.
+    """
+
+    set_name: str
+    units: str
+    duration: float
+    feasible: bool
+    reason: str
+    ts: np.ndarray
+    position: np.ndarray
+    estimate: np.ndarray
+    estimate_ideal: np.ndarray
+    frame_ts: np.ndarray
+    frame_index: np.ndarray
+    pixels: np.ndarray
+    pixels_true: np.ndarray
+    velocity_true: np.ndarray
+    velocity_measured: np.ndarray
+    q_puma: np.ndarray
+    q_arm: np.ndarray | None
+    rms: np.ndarray
+    rms_frames: np.ndarray
+    rms_ideal: np.ndarray
+    tracking_rms_px: float
+    result: str
+    frames: np.ndarray | None
+
+
+def _quad_centre(c):
+    """The intersection of the diagonals of a quadrilateral (4, 2): the exact image of a
+    square's centre under any perspective (NaN if a corner is NaN)."""
+    p1, p2, p3, p4 = c
+    d1, d2 = p3 - p1, p4 - p2
+    det = d1[0] * -d2[1] - d1[1] * -d2[0]
+    rhs = p2 - p1
+    s = (rhs[0] * -d2[1] - rhs[1] * -d2[0]) / det
+    return p1 + s * d1
+
+
+def _testbed_motion(s: ThesisSet, units: str, ts, vp_amplitude):
+    """The camera's commanded body velocity u(t) (m/s, rad/s) and the marker's velocity in
+    the camera frame v_p(t) (m/s) of a set, under a unit reading."""
+    scale = UNITS[units]
+    amp = s.vp_amplitude if vp_amplitude is None else tuple(vp_amplitude)
+
+    def u(t):
+        u_set, _ = _velocities(s, t)  # A's numbers, in the reading's unit
+        return u_set * jnp.array([scale, scale, scale, 1.0, 1.0, 1.0])
+
+    def v_p(t):
+        return scale * jnp.stack(
+            [amp[0] * jnp.sin(0.5 * t), amp[1] * jnp.cos(0.3 * t), jnp.zeros_like(t)]
+        )
+
+    return u, v_p
+
+
+def testbed(
+    set_name: str,
+    *,
+    units: str = "cm",
+    duration: float = 30.0,
+    rate_hz: int = 1000,
+    camera_hz: int = 30,
+    vp_amplitude=None,
+    Kc_true=KC_REFINED,
+    Kc_observer=KC_REFINED,
+    track: bool = True,
+    keep_frames: bool = False,
+    seed: int = 0,
+) -> TestbedRun:
+    """Run one thesis set on the twin of its testbed, end to end.
+
+    1. The PUMA 560 (Table 4-1, `visjax.kinematics.puma560` with the camera as its tool)
+       follows the set's camera velocities: the $v_{cx}, v_{cy}, \\omega_z$ of its $A$ (and
+       the sinusoids of `SETS` for the time-varying sets), read in `units`, by integrating
+       the inverse velocity kinematics (4.6) forwards and backwards from a downward-looking
+       posture at mid-run (`TESTBED`). A singular configuration (the arm out of reach) ends
+       the set as infeasible.
+    2. The marker: static on the table under the camera's mid-run position (Experiment I),
+       or on the two-link robot (Experiment II), whose joints follow, by its inverse
+       kinematics, a path with the velocity `vp_amplitude` $\\cdot [\\sin 0.5t, \\cos 0.3t]$
+       in the camera frame (default the set's `vp_amplitude`, in the reading's unit per s;
+       $v_{pz} = 0$, Assumption 3.1).
+    3. Truth at `rate_hz`: $r_{obj/cam} = R_{cam}^{-1}(r_{obj} - r_{cam})$ (section 5.1) from
+       both robots' forward kinematics.
+    4. At `camera_hz`: the camera's view rendered with `Kc_true` (a textured table and the
+       ArUco marker, `visjax.frontend.render_planes`); the marker found by
+       `detect_aruco` in frame 0; its corners tracked by KLT with a forward-backward check
+       (`track_frames`); the point is the diagonals' intersection (the exact image of the
+       marker's centre). The camera velocities from the encoders (`TESTBED`).
+    5. The UIO (3.5) with the set's gains at `rate_hz` on the held frames, in the reading's
+       length unit, with `Kc_observer`; once from tracked pixels, once from exact ones.
+
+    `track=False` skips rendering and tracking (the tracked pixels are then the exact ones).
+    """
+    import cv2  # noqa: F401  (the frontend needs OpenCV; fail early and clearly)
+
+    from ..frontend import Plane, detect_aruco, fiducial_marker, render_planes, textured_table
+    from ..kinematics import TwoLinkArm, puma560
+    from ..sim import encoder_twist, follow_tool_twist, planar_path
+
+    if set_name not in SETS:
+        raise ValueError(f"unknown set {set_name!r}; expected one of {list(SETS)}.")
+    if units not in UNITS:
+        raise ValueError(f"`units` must be 'cm' or 'm'; got {units!r}.")
+    s = SETS[set_name]
+    cfg = TESTBED
+    ts = sample_times(duration, rate_hz)
+    ts_np = np.asarray(ts)
+    n = ts.shape[0]
+    t_mid = float(ts_np[n // 2])
+    u_fn, vp_fn = _testbed_motion(s, units, ts, vp_amplitude)
+
+    # 1. the PUMA: a downward-looking camera (optical axis S6 along -Z, x along +X) at
+    # mid-run; integrate (4.6) forwards and backwards from there
+    chain = puma560(cfg["tool"])
+    R_mid = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+    p_mid = np.array([*cfg["camera_mid_xy"], cfg["table_z"] + cfg["camera_height"]])
+    q_mid = chain.solve_pose(R_mid, p_mid, jnp.array(cfg["q_guess"])).q
+    # one camera period before t = 0 too, so that the encoders have a history at frame 0
+    window = max(1, rate_hz // camera_hz)
+    pre = -jnp.arange(window, 0, -1, dtype=ts.dtype) / rate_hz
+    ts_all = jnp.concatenate([pre, ts])
+    mid = window + n // 2
+    after, before = ts_all[mid:], ts_all[: mid + 1][::-1]
+    fwd = follow_tool_twist(chain, q_mid, u_fn, after)
+    bwd = follow_tool_twist(chain, q_mid, u_fn, before)
+    q_all = np.concatenate([np.asarray(bwd.q)[::-1][:-1], np.asarray(fwd.q)])
+    q = q_all[window:]
+    feasible, reason = True, ""
+    for part, direction in ((fwd, "after"), (bwd, "before")):
+        if part.result != RESULTS.successful:
+            k = int(part.failed_sample)
+            t_fail = float(np.asarray(part.ts)[k])
+            feasible = False
+            reason += (
+                f"the PUMA 560 cannot follow the camera velocities {direction} mid-run: "
+                f"{result_names(part.result)} at t = {t_fail:.3f} s. "
+            )
+    T = np.asarray(jax.vmap(chain.forward)(jnp.asarray(np.nan_to_num(q))))
+    R_cam = T[:, :3, :3]
+    p_cam = np.einsum("nij,j->ni", R_cam, np.asarray(cfg["tool"])) + T[:, :3, 3]
+
+    # 2. the marker
+    nadir = np.array([*cfg["camera_mid_xy"], cfg["table_z"]])
+    q_arm = None
+    if s.moving:
+        # v_p in the camera frame; the camera turns at -w_z about Z (S6 = -Z), so the path in
+        # the plane is planar_path with (v_px, -v_py) at the rate -w_z (as for the camera)
+        wz = float(np.asarray(u_fn(jnp.zeros(())))[5])
+        _, c = planar_path(lambda t: vp_fn(t)[:2] * jnp.array([1.0, -1.0]), -wz, ts, t_mid)
+        # the camera's heading at mid-run is 0 (x along +X): the planar frame is F's X-Y
+        arm = TwoLinkArm(*cfg["two_link_lengths"])
+        l1, l2 = cfg["two_link_lengths"]
+        reach = cfg["two_link_reach_at_mid"]
+        base = nadir[:2] - np.array([0.0, -reach])  # the robot's base in front of the marker
+        rel = nadir[:2] + np.asarray(c) - base
+        q_arm = np.asarray(jax.vmap(lambda p: arm.inverse(p, elbow=1))(jnp.asarray(rel)))
+        p_xy = base + np.asarray(jax.vmap(arm.forward)(jnp.asarray(q_arm)))
+        p_obj = np.concatenate([p_xy, np.full((n, 1), cfg["table_z"] + cfg["marker_height"])], 1)
+        yaw = q_arm.sum(axis=1)  # the marker turns with the end effector
+        del l1, l2
+    else:
+        p_obj = np.broadcast_to(nadir, (n, 3)).copy()
+        yaw = np.zeros(n)
+    position = np.einsum("nji,nj->ni", R_cam, p_obj - p_cam)  # section 5.1, in m
+
+    # 3. the camera: frames, the exact projection of the marker's centre, the encoders
+    held, first = hold_indices(n, rate_hz, camera_hz)
+    Kt = np.asarray(Kc_true, float)
+    cam = position[first]
+    pixels_true = (cam[:, :2] / cam[:, 2:]) @ Kt[:2, :2].T + Kt[:2, 2]
+    u_true = np.asarray(jax.vmap(u_fn)(ts))
+    u_enc = np.asarray(
+        encoder_twist(
+            chain,
+            jnp.asarray(np.nan_to_num(q_all)),
+            float(rate_hz),
+            resolution=cfg["encoder_resolution"],
+            window=window,
+        )
+    )[window:]
+    delay = int(round(cfg["velocity_delay_s"] * rate_hz))
+    velocity_measured = u_enc[np.maximum(first - delay, 0)]
+
+    w, h = cfg["image_size"]
+    frames = None
+    pixels = pixels_true.copy()
+    tracking_rms = 0.0
+    if track and feasible:
+        table_tex = textured_table((1000, 1000), seed=seed)
+        table = Plane(
+            table_tex,
+            0.002,
+            _pose_matrix(np.eye(3), np.array([nadir[0] - 1.0, nadir[1] - 1.0, cfg["table_z"]])),
+        )
+        marker_tex, marker_corners = fiducial_marker(0)
+        side_px = marker_corners[1, 0] - marker_corners[0, 0]
+        scale = cfg["marker_side"] / side_px
+        centre_tex = marker_corners.mean(axis=0)
+        frames = np.zeros((len(first), h, w), np.uint8)
+        for i, k in enumerate(first):
+            # the marker's frame: its centre at p_obj, turned by yaw about Z, its texture's
+            # rows along -Y so that the downward-looking camera sees it unmirrored
+            c_, s_ = np.cos(yaw[k]), np.sin(yaw[k])
+            Rm = np.array([[c_, s_, 0.0], [s_, -c_, 0.0], [0.0, 0.0, -1.0]])
+            origin = p_obj[k] - Rm @ np.array([*((centre_tex + 0.5) * scale), 0.0])
+            marker = Plane(marker_tex, scale, _pose_matrix(Rm, origin))
+            frames[i] = render_planes(
+                [table, marker],
+                Kt,
+                R_cam[k],
+                p_cam[k],
+                (h, w),
+                supersample=cfg["supersample"],
+            )
+        tracks = _track_marker(frames, camera_hz, detect_aruco)
+        pixels = tracks
+        err = np.linalg.norm(pixels - pixels_true, axis=1)
+        tracking_rms = float(np.sqrt(np.nanmean(err**2)))
+        if not keep_frames:
+            frames = None
+
+    # 4. the UIO, in the reading's length unit
+    to_unit = 1.0 / UNITS[units]
+    vel_obs = velocity_measured * np.array([to_unit] * 3 + [1.0] * 3)
+    frame_ts = ts_np[first]
+    obs = observer(set_name, x3_guess_cm=100.0) if units == "cm" else _observer_m(set_name)
+
+    def estimate_from(px):
+        stream = moving_camera_stream(
+            frame_ts, px, vel_obs, jnp.asarray(Kc_observer, float), dropped="hold"
+        )
+        sol = run(obs, stream, dt=1.0 / rate_hz, throw=False)
+        est = np.asarray(sol.outputs.position) / to_unit
+        return est, result_names(sol.result)
+
+    nan3 = np.full(3, np.nan)
+    if feasible:
+        estimate, result = estimate_from(pixels)
+        estimate_ideal, _ = estimate_from(pixels_true)
+        m = estimate.shape[0]
+        steady = ts_np[:m] >= duration / 2
+        rms = np.sqrt(np.mean((estimate - position[:m])[steady] ** 2, axis=0))
+        rms_ideal = np.sqrt(np.mean((estimate_ideal - position[:m])[steady] ** 2, axis=0))
+        at_frames = first[(first < m) & (ts_np[first] >= duration / 2)]
+        rms_frames = np.sqrt(np.mean((estimate[at_frames] - position[at_frames]) ** 2, axis=0))
+    else:
+        estimate = estimate_ideal = np.full((n, 3), np.nan)
+        rms = rms_ideal = rms_frames = nan3
+        result = "not_run"
+    return TestbedRun(
+        set_name=set_name,
+        units=units,
+        duration=float(duration),
+        feasible=feasible,
+        reason=reason.strip(),
+        ts=ts_np,
+        position=position,
+        estimate=estimate,
+        estimate_ideal=estimate_ideal,
+        frame_ts=frame_ts,
+        frame_index=np.asarray(first),
+        pixels=pixels,
+        pixels_true=pixels_true,
+        velocity_true=u_true[first],
+        velocity_measured=velocity_measured,
+        q_puma=q,
+        q_arm=q_arm,
+        rms=rms,
+        rms_frames=rms_frames,
+        rms_ideal=rms_ideal,
+        tracking_rms_px=tracking_rms,
+        result=result,
+        frames=frames,
+    )
+
+
+def _pose_matrix(R, p):
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def _track_marker(frames, fps, detect_aruco):
+    """The marker's centre in every frame: ArUco detection in frame 0, KLT on its four
+    corners with the forward-backward check, the diagonals' intersection (NaN once a
+    corner is lost)."""
+    from ..frontend import track_frames
+
+    ids, corners = detect_aruco(frames[0])
+    if len(ids) == 0:
+        raise ValueError("the fiducial marker is not detected in the first frame.")
+    tracks = track_frames(frames, fps=fps, points=corners[0], win=15)
+    return np.stack([_quad_centre(c) for c in tracks.pixels])
+
+
+def _observer_m(set_name: str) -> UnknownInputObserver:
+    """The set's UIO with its $A$ read in m/s: lengths in metres, the same 1 m initial
+    depth guess as the cm reading's."""
+    s = SETS[set_name]
+    return UnknownInputObserver(A=s.A, D=jnp.array(s.D, float)[:, None], K=s.K, Y=s.Y, x3_guess=1.0)

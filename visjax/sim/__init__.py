@@ -19,6 +19,13 @@ from ._rigs import (
     moving_camera_point as moving_camera_point,
     platform_camera_pixels as platform_camera_pixels,
 )
+from ._robots import (
+    JointTrajectory as JointTrajectory,
+    encoder_twist as encoder_twist,
+    follow_tool_twist as follow_tool_twist,
+    planar_path as planar_path,
+    quantise as quantise,
+)
 from ._scene import (
     CameraRig as CameraRig,
     Sampler as Sampler,

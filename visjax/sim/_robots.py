@@ -1,0 +1,197 @@
+"""Joint trajectories of serial robots and what their encoders report (no paper here).
+
+`follow_tool_twist` drives a six-joint arm so that its tool follows a commanded twist, by
+integrating the inverse velocity kinematics $\\dot q = J^{-1}(q)[\\ldots]$ (Crane and
+Duffy's eq. (4.6) in Jang's thesis); `encoder_twist` is the tool twist a robot controller
+computes from quantised joint encoders; `planar_path` integrates a body that turns about
+one axis in a plane (the camera of a downward-looking rig).
+"""
+
+from collections.abc import Callable
+from typing import final
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from .._results import RESULTS
+from .._util import as_float, check_shape
+from ..kinematics import SerialChain
+
+
+@final
+class JointTrajectory(eqx.Module):
+    """Joint angles over time.
+
+    **Fields:** `ts` (N,); `q` (N, n) rad; `sigma_min` (N,) the smallest singular value of
+    the velocity Jacobian at each sample; `result` (`singular_configuration` when
+    `sigma_min` fell below the threshold, `nonfinite_output`); `failed_sample` the first
+    such sample (-1 when successful).
+    """
+
+    ts: Float[Array, " N"]
+    q: Float[Array, "N n"]
+    sigma_min: Float[Array, " N"]
+    result: RESULTS
+    failed_sample: Int[Array, ""]
+
+
+def follow_tool_twist(
+    chain: SerialChain,
+    q0: Float[ArrayLike, "6"],
+    twist: Callable[[Array], Array],
+    ts: Float[ArrayLike, " N"],
+    *,
+    local: bool = True,
+    min_singular_value: float = 1e-2,
+    rtol: float = 1e-10,
+    atol: float = 1e-12,
+) -> JointTrajectory:
+    """Joint angles that make the tool follow `twist(t)` from `q0` at `ts[0]`.
+
+    Integrates $\\dot q = J^{-1}(q)[V_{tool} - \\omega \\times (P_{tool} - P_6); \\omega]$
+    (Jang's thesis, eq. (4.6)) with an 8th-order adaptive solver. A configuration whose
+    Jacobian's smallest singular value is below `min_singular_value` (m) at any sample is
+    a `singular_configuration` result, with the first such sample.
+
+    **Arguments:** `chain` a six-joint `SerialChain`; `q0` (6,); `twist(t)` (6,): the
+    tool's $[V; \\omega]$, in the tool frame's basis (`local=True`, e.g. a camera's own
+    velocities) or in the fixed frame; `ts` (N,) output times from `ts[0]`, increasing
+    (or decreasing: integrated backwards in time).
+
+    **Returns:** a `JointTrajectory`.
+    """
+    q0, ts = as_float(q0), as_float(ts)
+    check_shape(q0, (chain.n_joints,), "q0")
+    check_shape(ts, (None,), "ts")
+
+    def field(t, q, args):
+        return chain.inverse_velocity(q, twist(t), local=local, throw=False).qdot
+
+    def sigma_min(q):
+        return chain.inverse_velocity(q, jnp.zeros(6, q.dtype), throw=False).sigma_min
+
+    # stop at the first singular configuration: near it the joint rates grow without bound
+    # and an adaptive solver would take ever smaller steps
+    event = diffrax.Event(lambda t, q, args, **kwargs: ~(sigma_min(q) >= min_singular_value))
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Dopri8(),
+        ts[0],
+        ts[-1],
+        dt0=None,
+        y0=q0,
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=100_000,
+        event=event,
+        throw=False,
+    )
+    q = sol.ys  # inf after an event
+    sigma = jax.vmap(sigma_min)(q)
+    bad = ~(sigma >= min_singular_value)
+    nonfinite = ~jnp.all(jnp.isfinite(q), axis=1)
+    failed = bad | nonfinite
+    first = jnp.where(jnp.any(failed), jnp.argmax(failed), -1)
+    # the event stops the solve at a singular configuration (the samples after it are inf)
+    stopped = sol.result == diffrax.RESULTS.event_occurred
+    result = RESULTS.where(
+        jnp.any(nonfinite) & ~stopped,
+        RESULTS.nonfinite_output,
+        RESULTS.where(jnp.any(bad), RESULTS.singular_configuration, RESULTS.successful),
+    )
+    solver_ok = (sol.result == diffrax.RESULTS.successful) | (
+        sol.result == diffrax.RESULTS.event_occurred
+    )
+    result = RESULTS.where(solver_ok, result, RESULTS.promote(sol.result))
+    return JointTrajectory(ts=ts, q=q, sigma_min=sigma, result=result, failed_sample=first)
+
+
+def quantise(q: Float[ArrayLike, "..."], resolution: float) -> Float[Array, "..."]:
+    """Encoder readings: `q` rounded to a multiple of `resolution` (rad per count)."""
+    if not resolution > 0:
+        raise ValueError(f"`resolution` must be positive; got {resolution!r}.")
+    q = as_float(q)
+    return jnp.round(q / resolution) * resolution
+
+
+def encoder_twist(
+    chain: SerialChain,
+    q: Float[ArrayLike, "N 6"],
+    rate_hz: float,
+    *,
+    resolution: float,
+    window: int,
+    local: bool = True,
+) -> Float[Array, "N 6"]:
+    """The tool twist a controller computes from its joint encoders, at every sample.
+
+    The readings are `quantise(q, resolution)`; the joint rates are their backward
+    difference over `window` samples, $(\\tilde q_k - \\tilde q_{k-w}) / (w / f)$ (the mean
+    rate over the last `window` samples: a delay of half the window); the twist is eq.
+    (4.5) at $\\tilde q_k$. The first `window` samples use the first reading as the
+    earlier one (rate 0 at sample 0).
+
+    **Returns:** (N, 6) $[V; \\omega]$ of the tool point, in the tool frame's basis
+    (`local=True`) or in $F$.
+    """
+    q = as_float(q)
+    check_shape(q, (None, chain.n_joints), "q")
+    if not (isinstance(window, int) and window >= 1):
+        raise ValueError(f"`window` must be a positive integer; got {window!r}.")
+    qm = quantise(q, resolution)
+    earlier = jnp.concatenate([jnp.repeat(qm[:1], window, axis=0), qm[:-window]], axis=0)
+    k = jnp.arange(q.shape[0])
+    span = jnp.minimum(k, window).astype(q.dtype)[:, None] / rate_hz
+    qdot = jnp.where(span > 0, (qm - earlier) / jnp.where(span > 0, span, 1.0), 0.0)
+    return jax.vmap(lambda q, qd: chain.tool_twist(q, qd, local=local))(qm, qdot)
+
+
+def planar_path(
+    v: Callable[[Array], Array],
+    omega: float,
+    ts: Float[ArrayLike, " N"],
+    t_ref: float,
+) -> tuple[Float[Array, " N"], Float[Array, "N 2"]]:
+    """A body turning at the constant rate `omega` (rad/s) about an axis normal to a plane
+    and translating with `v(t)` (2,) in its own basis: its heading $\\psi(t)$ and position
+    $c(t)$ in the plane, with $\\psi = 0$ and $c = 0$ at `t_ref`.
+
+    $\\dot\\psi = \\omega$, $\\dot c = R(\\psi) v(t)$, $R(\\psi)$ the planar rotation;
+    integrated with an 8th-order solver from `t_ref` forwards and backwards.
+    """
+    ts = as_float(ts)
+    check_shape(ts, (None,), "ts")
+
+    def field(t, c, args):
+        psi = omega * (t - t_ref)
+        cs, sn = jnp.cos(psi), jnp.sin(psi)
+        vt = v(t)
+        return jnp.stack([cs * vt[0] - sn * vt[1], sn * vt[0] + cs * vt[1]])
+
+    ts_np = np.asarray(ts)
+    before, after = ts_np[ts_np < t_ref], ts_np[ts_np >= t_ref]
+
+    def solve(t_out, t_end):
+        if t_out.size == 0:
+            return jnp.zeros((0, 2), ts.dtype)
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field),
+            diffrax.Dopri8(),
+            t_ref,
+            t_end,
+            dt0=None,
+            y0=jnp.zeros(2, ts.dtype),
+            saveat=diffrax.SaveAt(ts=jnp.asarray(t_out)),
+            stepsize_controller=diffrax.PIDController(rtol=1e-12, atol=1e-14),
+            max_steps=100_000,
+        )
+        return sol.ys
+
+    c_before = solve(before[::-1], float(before[0]) if before.size else t_ref)[::-1]
+    c_after = solve(after, float(after[-1]) if after.size else t_ref)
+    c = jnp.concatenate([c_before, c_after], axis=0)
+    return omega * (ts - t_ref), c
