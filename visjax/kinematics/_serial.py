@@ -303,7 +303,9 @@ PUMA560_TABLE = {
 }
 
 
-def puma560(tool: Float[ArrayLike, "3"] = (0.0, 0.0, 0.0)) -> SerialChain:
+def puma560(
+    tool: Float[ArrayLike, "3"] | tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> SerialChain:
     """The PUMA 560 of Jang's thesis, Table 4-1, in metres, with the tool point `tool`
     (${}^6P_{tool}$, m, in the sixth joint frame). Joint angles $q = [\\phi_1, \\theta_2,
     \\ldots, \\theta_6]$ in radians, as the thesis measures them (no offsets)."""

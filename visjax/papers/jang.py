@@ -326,7 +326,10 @@ TESTBED = {
     "table_z": -0.60,  # m: the table top in the PUMA's frame F (origin at the shoulder)
     "camera_height": 0.80,  # m above the table at mid-run (the 80 cm depth of `scenario`)
     "camera_mid_xy": (0.50, 0.10),  # m: the camera's position in F at mid-run
-    "q_guess": (-0.10, 0.30, -0.08, 0.0, 2.92, 3.04),  # rad: a downward-looking posture
+    # rad: a downward-looking posture with the wrist far from its singularities
+    # (theta5 = 1.32 rad; a posture with theta5 near pi meets theta5 = pi within 6 s in
+    # sets I.2, I.4 and II.1)
+    "q_guess": (-2.645, -1.739, -0.082, np.pi, 1.321, -2.645),
     "tool": (0.0, 0.0, 0.10),  # m: the camera's centre in frame 6, 10 cm out along S6
     "marker_side": 0.06,  # m: the black square of the ArUco marker
     "marker_height": 0.02,  # m above the table, on the two-link robot (Experiment II)
@@ -510,33 +513,60 @@ def testbed(
     R_cam = T[:, :3, :3]
     p_cam = np.einsum("nij,j->ni", R_cam, np.asarray(cfg["tool"])) + T[:, :3, 3]
 
-    # 2. the marker
-    nadir = np.array([*cfg["camera_mid_xy"], cfg["table_z"]])
+    # 2. the marker, placed so that its image path is centred in the image on average: a
+    # point at p is seen at R^T (p - p_cam) - o from the image centre's ray o (camera frame,
+    # at the table's depth), and the mean of that over the run is zero for
+    # p = mean(p_cam + R o - c) with c the marker's own displacement
+    w, h = cfg["image_size"]
+    Kt = np.asarray(Kc_true, float)
+    depth = cfg["camera_height"] - (cfg["marker_height"] if s.moving else 0.0)
+    o = np.array(
+        [(w / 2 - Kt[0, 2]) / Kt[0, 0] * depth, (h / 2 - Kt[1, 2]) / Kt[1, 1] * depth, 0.0]
+    )
+    followed = np.all(np.isfinite(q), axis=1)
     q_arm = None
     if s.moving:
         # v_p in the camera frame; the camera turns at -w_z about Z (S6 = -Z), so the path in
-        # the plane is planar_path with (v_px, -v_py) at the rate -w_z (as for the camera)
+        # the plane is planar_path with (v_px, -v_py) at the rate -w_z (as for the camera),
+        # whose heading at mid-run is 0 (x along +X): the planar frame is F's X-Y
         wz = float(np.asarray(u_fn(jnp.zeros(())))[5])
         _, c = planar_path(lambda t: vp_fn(t)[:2] * jnp.array([1.0, -1.0]), -wz, ts, t_mid)
-        # the camera's heading at mid-run is 0 (x along +X): the planar frame is F's X-Y
+        c = np.concatenate([np.asarray(c), np.zeros((n, 1))], axis=1)
+    else:
+        c = np.zeros((n, 3))
+    centre = np.mean((p_cam + R_cam @ o - c)[followed], axis=0)
+    z_marker = cfg["table_z"] + (cfg["marker_height"] if s.moving else 0.0)
+    p_ref = np.array([centre[0], centre[1], z_marker])
+    # then minimise the path's largest excursion from the image centre (a convex function
+    # of the marker's position on the table: a coarse-to-fine grid search)
+    frame_k = hold_indices(n, rate_hz, camera_hz)[1]
+    frame_k = frame_k[followed[frame_k]]
+    p_ref = _centre_in_view(p_ref, R_cam[frame_k], p_cam[frame_k] - c[frame_k], Kt, (w, h))
+    if s.moving:
         arm = TwoLinkArm(*cfg["two_link_lengths"])
         l1, l2 = cfg["two_link_lengths"]
-        reach = cfg["two_link_reach_at_mid"]
-        base = nadir[:2] - np.array([0.0, -reach])  # the robot's base in front of the marker
-        rel = nadir[:2] + np.asarray(c) - base
+        base = p_ref[:2] + np.array([0.0, cfg["two_link_reach_at_mid"]])  # beside the marker
+        rel = p_ref[:2] + c[:, :2] - base
+        dist = np.linalg.norm(rel, axis=1)
+        if feasible and not np.all((dist < l1 + l2 - 1e-3) & (dist > abs(l1 - l2) + 1e-3)):
+            k = int(np.argmax(~((dist < l1 + l2 - 1e-3) & (dist > abs(l1 - l2) + 1e-3))))
+            feasible = False
+            reason += (
+                f"the two-link robot cannot follow the marker's path: out of reach at "
+                f"t = {ts_np[k]:.3f} s. "
+            )
+        rel = np.where(feasible, rel, np.array([l1, l2]) * 0.5 + np.array([0.1, 0.0]))
         q_arm = np.asarray(jax.vmap(lambda p: arm.inverse(p, elbow=1))(jnp.asarray(rel)))
         p_xy = base + np.asarray(jax.vmap(arm.forward)(jnp.asarray(q_arm)))
-        p_obj = np.concatenate([p_xy, np.full((n, 1), cfg["table_z"] + cfg["marker_height"])], 1)
+        p_obj = np.concatenate([p_xy, np.full((n, 1), z_marker)], axis=1)
         yaw = q_arm.sum(axis=1)  # the marker turns with the end effector
-        del l1, l2
     else:
-        p_obj = np.broadcast_to(nadir, (n, 3)).copy()
+        p_obj = np.broadcast_to(p_ref, (n, 3)).copy()
         yaw = np.zeros(n)
     position = np.einsum("nji,nj->ni", R_cam, p_obj - p_cam)  # section 5.1, in m
 
     # 3. the camera: frames, the exact projection of the marker's centre, the encoders
     held, first = hold_indices(n, rate_hz, camera_hz)
-    Kt = np.asarray(Kc_true, float)
     cam = position[first]
     pixels_true = (cam[:, :2] / cam[:, 2:]) @ Kt[:2, :2].T + Kt[:2, 2]
     u_true = np.asarray(jax.vmap(u_fn)(ts))
@@ -552,7 +582,6 @@ def testbed(
     delay = int(round(cfg["velocity_delay_s"] * rate_hz))
     velocity_measured = u_enc[np.maximum(first - delay, 0)]
 
-    w, h = cfg["image_size"]
     frames = None
     pixels = pixels_true.copy()
     tracking_rms = 0.0
@@ -561,7 +590,7 @@ def testbed(
         table = Plane(
             table_tex,
             0.002,
-            _pose_matrix(np.eye(3), np.array([nadir[0] - 1.0, nadir[1] - 1.0, cfg["table_z"]])),
+            _pose_matrix(np.eye(3), np.array([p_ref[0] - 1.0, p_ref[1] - 1.0, cfg["table_z"]])),
         )
         marker_tex, marker_corners = fiducial_marker(0)
         side_px = marker_corners[1, 0] - marker_corners[0, 0]
@@ -643,6 +672,27 @@ def testbed(
         result=result,
         frames=frames,
     )
+
+
+def _centre_in_view(p0, R_cam, p_cam, K, size):
+    """The horizontal position of a point near `p0` whose image through cameras
+    `(R_cam, p_cam)` (F, 3, 3), (F, 3) strays least from the image centre (the largest of
+    |u - W/2| / (W/2) and |v - H/2| / (H/2) over the frames)."""
+    w, h = size
+    best = np.asarray(p0, float)
+    for span, step in ((0.4, 0.02), (0.02, 0.001)):
+        g = np.arange(-span, span + step / 2, step)
+        cand = best[None, :] + np.stack(
+            [*(x.ravel() for x in np.meshgrid(g, g)), np.zeros(g.size**2)], axis=1
+        )
+        cam = np.einsum("fji,gfj->gfi", R_cam, cand[:, None, :] - p_cam[None])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = K[0, 0] * cam[..., 0] / cam[..., 2] + K[0, 2]
+            v = K[1, 1] * cam[..., 1] / cam[..., 2] + K[1, 2]
+        cost = np.maximum(np.abs(u - w / 2) / (w / 2), np.abs(v - h / 2) / (h / 2))
+        cost = np.where(cam[..., 2] > 0, cost, np.inf).max(axis=1)
+        best = cand[int(np.argmin(cost))]
+    return best
 
 
 def _pose_matrix(R, p):
