@@ -193,3 +193,30 @@ def test_bad_shapes_are_value_errors(no_jaxtyping):
         )
     with pytest.raises(ValueError, match="`twist` must have shape"):
         CHAIN.inverse_velocity(np.zeros(6), np.zeros(3))
+
+
+def test_solve_pose_under_jit_and_vmap():
+    rng = np.random.default_rng(6)
+    q_true = rng.uniform(-2.0, 2.0, (4, 6))
+    q_true[:, 4] = rng.uniform(0.5, 2.5, 4)  # away from the wrist singularity
+    R, p = jax.vmap(CHAIN.tool_pose)(q_true)
+    guesses = q_true + 0.05 * rng.normal(size=q_true.shape)
+    solve = jax.jit(jax.vmap(lambda R, p, g: CHAIN.solve_pose(R, p, g, throw=False)))
+    sol = solve(R, p, guesses)
+    assert np.all(np.asarray(sol.result._value) == int(RESULTS.successful._value))
+    R2, p2 = jax.vmap(CHAIN.tool_pose)(sol.q)
+    np.testing.assert_allclose(np.asarray(R2), np.asarray(R), atol=1e-10)
+    np.testing.assert_allclose(np.asarray(p2), np.asarray(p), atol=1e-10)
+    assert float(np.max(np.asarray(sol.residual))) < 1e-10
+
+
+def test_two_link_gradients():
+    arm = TwoLinkArm(0.35, 0.25)
+    q = np.array([0.3, 0.9])
+    for i in range(2):
+        g = np.asarray(jax.jit(jax.grad(lambda q: arm.forward(q)[i]))(q))
+        np.testing.assert_allclose(g, np.asarray(arm.jacobian(q))[i], atol=1e-14)
+    # the inverse's derivative is the inverse Jacobian
+    p = np.asarray(arm.forward(q))
+    dq = np.asarray(jax.jacfwd(lambda p: arm.inverse(p))(p))
+    np.testing.assert_allclose(dq, np.linalg.inv(np.asarray(arm.jacobian(q))), atol=1e-10)
