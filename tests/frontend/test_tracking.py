@@ -17,6 +17,7 @@ from visjax.frontend import (
     render_planes,
     textured_table,
     track_frames,
+    track_marker,
     write_video,
 )
 
@@ -278,6 +279,33 @@ def test_aruco_detector_finds_the_rendered_marker_corners():
     assert tracks.alive[:, :4].all()  # the corners are tracked through the frames
     err = np.linalg.norm(tracks.pixels - truth_k, axis=-1)
     assert np.nanmax(err[:, :4]) < 0.5
+
+
+def test_track_marker_follows_refines_and_recovers_the_marker():
+    tex, corners = fiducial_marker(3, cell=12)
+    T = np.eye(4)
+    T[:3, :3] = _rot([0.2, 1.0, 0.0], 0.35)
+    T[:3, 3] = [-0.08, -0.05, -0.35]
+    marker = Plane(tex, 0.0015, T)
+    world = np.vstack([marker.world_points(corners), marker.world_points(corners.mean(0)[None])])
+    # a grey card passes in front of the marker in frames 10-13
+    card = Plane(np.full((40, 40), 128, np.uint8), 0.004, _translation([-0.12, -0.1, -0.5]))
+    frames = np.stack(
+        [
+            _render(k, [_table(), marker, card] if 10 <= k <= 13 else [_table(), marker])
+            for k in range(N_FRAMES)
+        ]
+    )
+    tracks = track_marker(frames)
+    assert list(tracks.corner) == [0, 1, 2, 3, 4] and set(tracks.marker_id) == {3}
+    truth = np.stack([project_points(K, *_pose(k), world) for k in range(N_FRAMES)])
+    err = np.linalg.norm(tracks.pixels - truth, axis=-1)
+    covered = np.zeros(N_FRAMES, bool)
+    covered[10:14] = True
+    assert np.all(np.isnan(tracks.pixels[covered]))  # lost under the card, not drifting
+    assert tracks.alive[~covered].all()  # re-detected as soon as it is seen again
+    assert np.nanmax(err[~covered]) < 0.3
+    assert np.sqrt(np.nanmean(err[~covered, 4] ** 2)) < 0.15  # the centre
 
 
 def test_cli_track_writes_npz_and_csv(tmp_path, capsys):

@@ -11,5 +11,10 @@ from ._scene_render import (
     render_planes as render_planes,
     textured_table as textured_table,
 )
-from ._tracking import Tracks as Tracks, detect_aruco as detect_aruco, track_frames as track_frames
+from ._tracking import (
+    Tracks as Tracks,
+    detect_aruco as detect_aruco,
+    track_frames as track_frames,
+    track_marker as track_marker,
+)
 from ._video import read_video as read_video, write_video as write_video

@@ -1,7 +1,9 @@
 """Jang's thesis, *structure of a moving point seen by a moving camera*: the published
 matrices, gains and RMS tables of its seven experiment sets, their simulated analogues
-(chapter 5), the observer of each set and the experiment. Nothing else in visjax knows
-these numbers.
+(chapter 5), the observer of each set and the experiment, and the testbed as a twin
+(`testbed`: the PUMA 560 of chapter 4 carrying the camera, the two-link robot carrying the
+marker, rendered frames tracked by KLT, encoder velocities; its assumptions in `TESTBED`).
+Nothing else in visjax knows these numbers.
 
 A point seen by a camera on a PUMA 560 (I.1-I.4: the point is static; II.1-II.3: it moves
 on a two-link robot). The truth is the perspective dynamics (2.11) integrated with an
@@ -397,17 +399,6 @@ class TestbedRun:
     frames: np.ndarray | None
 
 
-def _quad_centre(c):
-    """The intersection of the diagonals of a quadrilateral (4, 2): the exact image of a
-    square's centre under any perspective (NaN if a corner is NaN)."""
-    p1, p2, p3, p4 = c
-    d1, d2 = p3 - p1, p4 - p2
-    det = d1[0] * -d2[1] - d1[1] * -d2[0]
-    rhs = p2 - p1
-    s = (rhs[0] * -d2[1] - rhs[1] * -d2[0]) / det
-    return p1 + s * d1
-
-
 def _testbed_motion(s: ThesisSet, units: str, ts, vp_amplitude):
     """The camera's commanded body velocity u(t) (m/s, rad/s) and the marker's velocity in
     the camera frame v_p(t) (m/s) of a set, under a unit reading."""
@@ -448,18 +439,22 @@ def testbed(
        the inverse velocity kinematics (4.6) forwards and backwards from a downward-looking
        posture at mid-run (`TESTBED`). A singular configuration (the arm out of reach) ends
        the set as infeasible.
-    2. The marker: static on the table under the camera's mid-run position (Experiment I),
-       or on the two-link robot (Experiment II), whose joints follow, by its inverse
-       kinematics, a path with the velocity `vp_amplitude` $\\cdot [\\sin 0.5t, \\cos 0.3t]$
-       in the camera frame (default the set's `vp_amplitude`, in the reading's unit per s;
-       $v_{pz} = 0$, Assumption 3.1).
+    2. The marker: static on the table (Experiment I), or on the two-link robot
+       (Experiment II), whose joints follow, by its inverse kinematics, a path with the
+       velocity `vp_amplitude` $\\cdot [\\sin 0.5t, \\cos 0.3t]$ in the camera frame (default
+       the set's `vp_amplitude`, in the reading's unit per s; $v_{pz} = 0$, Assumption
+       3.1). It is placed where its image path strays least from the image centre (the
+       thesis' Figs. 5-3/5-4 show the point inside the image throughout; a rule for
+       visibility, fixed before any error was computed). The two-link robot out of reach
+       ends the set as infeasible.
     3. Truth at `rate_hz`: $r_{obj/cam} = R_{cam}^{-1}(r_{obj} - r_{cam})$ (section 5.1) from
        both robots' forward kinematics.
     4. At `camera_hz`: the camera's view rendered with `Kc_true` (a textured table and the
-       ArUco marker, `visjax.frontend.render_planes`); the marker found by
-       `detect_aruco` in frame 0; its corners tracked by KLT with a forward-backward check
-       (`track_frames`); the point is the diagonals' intersection (the exact image of the
-       marker's centre). The camera velocities from the encoders (`TESTBED`).
+       ArUco marker, `visjax.frontend.render_planes`); the marker found by ArUco
+       detection, its corners tracked by KLT with a forward-backward check and refined
+       on each frame, re-detected when lost (`visjax.frontend.track_marker`); the point
+       is the diagonals' intersection (the exact image of the marker's centre). The
+       camera velocities from the encoders (`TESTBED`).
     5. The UIO (3.5) with the set's gains at `rate_hz` on the held frames, in the reading's
        length unit, with `Kc_observer`; once from tracked pixels, once from exact ones.
 
@@ -467,7 +462,7 @@ def testbed(
     """
     import cv2  # noqa: F401  (the frontend needs OpenCV; fail early and clearly)
 
-    from ..frontend import Plane, detect_aruco, fiducial_marker, render_planes, textured_table
+    from ..frontend import Plane, fiducial_marker, render_planes, textured_table, track_marker
     from ..kinematics import TwoLinkArm, puma560
     from ..sim import encoder_twist, follow_tool_twist, planar_path
 
@@ -513,10 +508,10 @@ def testbed(
     R_cam = T[:, :3, :3]
     p_cam = np.einsum("nij,j->ni", R_cam, np.asarray(cfg["tool"])) + T[:, :3, 3]
 
-    # 2. the marker, placed so that its image path is centred in the image on average: a
-    # point at p is seen at R^T (p - p_cam) - o from the image centre's ray o (camera frame,
-    # at the table's depth), and the mean of that over the run is zero for
-    # p = mean(p_cam + R o - c) with c the marker's own displacement
+    # 2. the marker: a first placement centres its image path on average (a point at p is
+    # seen at R^T (p - p_cam) - o from the image centre's ray o, camera frame, at the
+    # table's depth; the mean of that over the run is zero for p = mean(p_cam + R o - c),
+    # c the marker's own displacement), then the largest excursion is minimised
     w, h = cfg["image_size"]
     Kt = np.asarray(Kc_true, float)
     depth = cfg["camera_height"] - (cfg["marker_height"] if s.moving else 0.0)
@@ -612,8 +607,8 @@ def testbed(
                 (h, w),
                 supersample=cfg["supersample"],
             )
-        tracks = _track_marker(frames, camera_hz, detect_aruco)
-        pixels = tracks
+        tracks = track_marker(frames, fps=camera_hz, marker_id=0)
+        pixels = tracks.pixels[:, 4]  # the centre: the diagonals' intersection
         err = np.linalg.norm(pixels - pixels_true, axis=1)
         tracking_rms = float(np.sqrt(np.nanmean(err**2)))
         if not keep_frames:
@@ -699,19 +694,6 @@ def _pose_matrix(R, p):
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, p
     return T
-
-
-def _track_marker(frames, fps, detect_aruco):
-    """The marker's centre in every frame: ArUco detection in frame 0, KLT on its four
-    corners with the forward-backward check, the diagonals' intersection (NaN once a
-    corner is lost)."""
-    from ..frontend import track_frames
-
-    ids, corners = detect_aruco(frames[0])
-    if len(ids) == 0:
-        raise ValueError("the fiducial marker is not detected in the first frame.")
-    tracks = track_frames(frames, fps=fps, points=corners[0], win=15)
-    return np.stack([_quad_centre(c) for c in tracks.pixels])
 
 
 def _observer_m(set_name: str) -> UnknownInputObserver:
