@@ -371,6 +371,34 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
     return summary
 
 
+def _thesis_set_names(sets) -> list:
+    """The thesis' sets asked for (all by default), checked by name."""
+    from .papers.jang import SETS
+
+    names = list(SETS) if not sets else list(sets)
+    for name in names:
+        if name not in SETS:
+            raise ValueError(f"unknown set {name!r}; choose from {list(SETS)}")
+    return names
+
+
+def _print_thesis_tables(summary, names, who: str) -> None:
+    """Tables 5-3 and 5-4: per set and axis, visjax's RMS (or "infeasible") and the thesis'."""
+    for group, label in (("I.", "Table 5-3 (static point)"), ("II.", "Table 5-4 (moving point)")):
+        in_group = [n for n in names if n.startswith(group)]
+        if not in_group:
+            continue
+        print(f"\n{label}: {who} (thesis)")
+        print(f"{'':<4}" + "".join(f"{n:>20}" for n in in_group))
+        for i, axis in enumerate("xyz"):
+            cells = []
+            for n in in_group:
+                rms = summary[n]["rms"]
+                value = f"{rms[i]:.4f}" if rms is not None else "infeasible"
+                cells.append(f"{value:>11} ({summary[n]['thesis_rms'][i]:.4f})")
+            print(f"{axis:<4}" + "".join(cells))
+
+
 def structure_report(
     sets=None,
     duration: float = 30.0,
@@ -387,10 +415,7 @@ def structure_report(
     from .papers.jang import SETS, structure_experiment
     from .plots import plot_structure
 
-    names = list(SETS) if not sets else list(sets)
-    for name in names:
-        if name not in SETS:
-            raise ValueError(f"unknown set {name!r}; choose from {list(SETS)}")
+    names = _thesis_set_names(sets)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -415,18 +440,7 @@ def structure_report(
         f"UIO (seed 003, eq. 3.5), simulated analogues: {duration:g} s, pixel noise "
         f"{noise:g} px, RMS position error over the second half (m)"
     )
-    for group, label in (("I.", "Table 5-3 (static point)"), ("II.", "Table 5-4 (moving point)")):
-        in_group = [n for n in names if n.startswith(group)]
-        if not in_group:
-            continue
-        print(f"\n{label}: visjax (thesis)")
-        print(f"{'':<4}" + "".join(f"{n:>20}" for n in in_group))
-        for i, axis in enumerate("xyz"):
-            row = "".join(
-                f"{summary[n]['rms'][i]:>11.4f} ({summary[n]['thesis_rms'][i]:.4f})"
-                for n in in_group
-            )
-            print(f"{axis:<4}{row}")
+    _print_thesis_tables(summary, names, "visjax")
     if out is not None:
         (out / "summary.json").write_text(json.dumps(summary, indent=2))
         print(f"\nwrote {out / 'summary.json'} and structure_<set>.png")
@@ -1128,10 +1142,7 @@ def testbed_report(
     from .papers.jang import KC_REFINED, SETS, UNITS, testbed
     from .plots import plot_testbed
 
-    names = list(SETS) if not sets else list(sets)
-    for name in names:
-        if name not in SETS:
-            raise ValueError(f"unknown set {name!r}; choose from {list(SETS)}")
+    names = _thesis_set_names(sets)
     if units not in UNITS:
         raise ValueError(f"`units` must be one of {list(UNITS)}; got {units!r}")
     if out is not None:
@@ -1178,19 +1189,7 @@ def testbed_report(
         f"UIO (Jang's thesis, eq. 3.5) on the testbed twin: A read in {units}/s, "
         f"{duration:g} s, RMS position error over the second half (m), at 1 kHz"
     )
-    for group, label in (("I.", "Table 5-3 (static point)"), ("II.", "Table 5-4 (moving point)")):
-        in_group = [n for n in names if n.startswith(group)]
-        if not in_group:
-            continue
-        print(f"\n{label}: twin (thesis)")
-        print(f"{'':<4}" + "".join(f"{n:>20}" for n in in_group))
-        for i, axis in enumerate("xyz"):
-            cells = []
-            for n in in_group:
-                rms = summary[n]["rms"]
-                value = f"{rms[i]:.4f}" if rms is not None else "infeasible"
-                cells.append(f"{value:>11} ({summary[n]['thesis_rms'][i]:.4f})")
-            print(f"{axis:<4}" + "".join(cells))
+    _print_thesis_tables(summary, names, "twin")
     for n in names:
         if not summary[n]["feasible"]:
             print(f"{n}: {summary[n]['reason']}")

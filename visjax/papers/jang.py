@@ -618,7 +618,9 @@ def testbed(
     to_unit = 1.0 / UNITS[units]
     vel_obs = velocity_measured * np.array([to_unit] * 3 + [1.0] * 3)
     frame_ts = ts_np[first]
-    obs = observer(set_name, x3_guess_cm=100.0) if units == "cm" else _observer_m(set_name)
+    # the same 1 m initial depth guess in either reading (in the m reading the observer's
+    # length unit is the metre, so its "cm" argument is a number of metres)
+    obs = observer(set_name, x3_guess_cm=100.0 if units == "cm" else 1.0)
 
     def estimate_from(px):
         stream = moving_camera_stream(
@@ -694,10 +696,3 @@ def _pose_matrix(R, p):
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, p
     return T
-
-
-def _observer_m(set_name: str) -> UnknownInputObserver:
-    """The set's UIO with its $A$ read in m/s: lengths in metres, the same 1 m initial
-    depth guess as the cm reading's."""
-    s = SETS[set_name]
-    return UnknownInputObserver(A=s.A, D=jnp.array(s.D, float)[:, None], K=s.K, Y=s.Y, x3_guess=1.0)
