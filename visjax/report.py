@@ -1133,8 +1133,9 @@ def testbed_report(
     moving sets to the amplitude of $v_{py}$.
 
     Writes `summary.json` (per set: `rms`, `thesis_rms`, `tracking_rms_px`, `units`, and the
-    scoring), `testbed_<set>.png`, `testbed_<set>.mp4`, `testbed_<set>.npz`, and with
-    `studies` `calibration.json` and `sensitivity.csv`.
+    scoring), `tables.csv` (Tables 5-3/5-4, one row per set and axis), `testbed_<set>.png`,
+    `testbed_<set>.mp4`, `testbed_<set>.npz`, and with `studies` `calibration.json` and
+    `sensitivity.csv`.
     """
     _enable_x64()
     from tqdm import tqdm
@@ -1198,7 +1199,29 @@ def testbed_report(
         _testbed_studies(runs, names, units, duration, seed, out, quiet)
     if out is not None:
         _write_json(out / "summary.json", summary)
-        print(f"\nwrote {out / 'summary.json'}, testbed_<set>.png/.mp4/.npz")
+        import pandas as pd
+
+        rows = []
+        for name in names:
+            e = summary[name]
+            for i, axis in enumerate("xyz"):
+                rows.append(
+                    {
+                        "set": name,
+                        "table": "5-3" if name.startswith("I.") else "5-4",
+                        "axis": axis,
+                        "units": units,
+                        "rms_m": e["rms"][i] if e["rms"] else None,
+                        "rms_frames_m": e["rms_frames"][i] if e["rms_frames"] else None,
+                        "rms_ideal_pixels_m": (
+                            e["rms_ideal_pixels"][i] if e["rms_ideal_pixels"] else None
+                        ),
+                        "thesis_rms_m": e["thesis_rms"][i],
+                        "feasible": e["feasible"],
+                    }
+                )
+        pd.DataFrame(rows).to_csv(out / "tables.csv", index=False)
+        print(f"\nwrote {out / 'summary.json'}, tables.csv, testbed_<set>.png/.mp4/.npz")
     if not quiet:
         print(f"({time.time() - t_start:.0f} s)")
     return summary
@@ -1285,6 +1308,7 @@ def _testbed_studies(runs, names, units, duration, seed, out, quiet) -> dict:
                     "rms_y": float(rms[1]),
                     "rms_z": float(rms[2]),
                     "feasible": bool(r.feasible),
+                    "result": r.result,
                 }
             )
     if rows:

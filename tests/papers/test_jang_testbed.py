@@ -121,6 +121,15 @@ def test_testbed_command_writes_its_outputs(tmp_path):
     assert 0 < entry["tracking_rms_px"] < 0.5
     for name in ("testbed_I.1.png", "testbed_I.1.mp4", "testbed_I.1.npz"):
         assert (out / name).stat().st_size > 1000
+    import pandas as pd
+
+    table = pd.read_csv(out / "tables.csv")
+    assert list(table["axis"]) == ["x", "y", "z"] and list(table["thesis_rms_m"]) == [
+        0.0016,
+        0.0047,
+        0.0214,
+    ]
+    np.testing.assert_allclose(table["rms_m"], entry["rms"], rtol=1e-12)
     with np.load(out / "testbed_I.1.npz") as z:
         assert z["estimate"].shape[1] == 3 and z["pixels"].shape[1] == 2
     with pytest.raises(SystemExit) as e:

@@ -371,7 +371,9 @@ class TestbedRun:
     - `rms` (3,) the RMS error over the second half at 1 kHz; `rms_frames` (3,) at the
       camera samples only; `rms_ideal` (3,) at 1 kHz from ideal pixels; `tracking_rms_px`
       the tracked centre's RMS distance to its projection (px).
-    - `result` the UIO's result name; `frames` (F, H, W) uint8 when kept, else `None`.
+    - `result` the UIO's result name (from tracked pixels; the RMS fields are NaN when a
+      run did not succeed, e.g. `diverged`: the depth estimate became negative); `frames`
+      (F, H, W) uint8 when kept, else `None`.
     """
 
     set_name: str
@@ -633,13 +635,22 @@ def testbed(
     nan3 = np.full(3, np.nan)
     if feasible:
         estimate, result = estimate_from(pixels)
-        estimate_ideal, _ = estimate_from(pixels_true)
+        if track:
+            estimate_ideal, result_ideal = estimate_from(pixels_true)
+        else:  # the tracked pixels are the exact ones
+            estimate_ideal, result_ideal = estimate, result
         m = estimate.shape[0]
         steady = ts_np[:m] >= duration / 2
         rms = np.sqrt(np.mean((estimate - position[:m])[steady] ** 2, axis=0))
         rms_ideal = np.sqrt(np.mean((estimate_ideal - position[:m])[steady] ** 2, axis=0))
         at_frames = first[(first < m) & (ts_np[first] >= duration / 2)]
         rms_frames = np.sqrt(np.mean((estimate[at_frames] - position[at_frames]) ** 2, axis=0))
+        # a run that stopped (the depth estimate left its valid set, `result` says so) has a
+        # frozen estimate: its errors are not reported as numbers
+        if result != "successful":
+            rms = rms_frames = nan3
+        if result_ideal != "successful":
+            rms_ideal = nan3
     else:
         estimate = estimate_ideal = np.full((n, 3), np.nan)
         rms = rms_ideal = rms_frames = nan3
