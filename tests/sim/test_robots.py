@@ -112,3 +112,25 @@ def test_planar_path_equals_the_closed_form():
     expected = np.stack([s * v[0] + (co - 1) * v[1], (1 - co) * v[0] + s * v[1]], 1) / omega
     np.testing.assert_allclose(np.asarray(c), expected, atol=1e-11)
     np.testing.assert_allclose(np.asarray(psi), omega * tau, atol=1e-15)
+
+
+def test_planar_path_and_follow_tool_twist_differentiate(q_start):
+    ts = jnp.linspace(0.0, 30.0, 301)
+    v = jnp.array([0.0115, -0.013])
+
+    def end_x(omega):
+        return planar_path(lambda t: v + 0 * t, omega, ts, 15.0)[1][-1, 0]
+
+    g = jax.jit(jax.grad(end_x))(-0.07)
+    h = 1e-6
+    np.testing.assert_allclose(g, (end_x(-0.07 + h) - end_x(-0.07 - h)) / (2 * h), rtol=1e-6)
+
+    ts1 = jnp.linspace(0.0, 1.0, 11)
+
+    def first_joint(scale):
+        return follow_tool_twist(CHAIN, q_start, lambda t: scale * _constant(t), ts1).q[-1, 0]
+
+    g = jax.grad(first_joint)(1.0)
+    fd = (first_joint(1.0 + h) - first_joint(1.0 - h)) / (2 * h)
+    np.testing.assert_allclose(g, fd, rtol=1e-6)
+    assert abs(float(g)) > 1e-3
