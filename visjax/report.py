@@ -1172,6 +1172,7 @@ def testbed_report(
                     "estimate",
                     "estimate_ideal",
                     "frame_ts",
+                    "frame_index",
                     "pixels",
                     "pixels_true",
                     "velocity_true",

@@ -536,8 +536,8 @@ def testbed(
     p_ref = np.array([centre[0], centre[1], z_marker])
     # then minimise the path's largest excursion from the image centre (a convex function
     # of the marker's position on the table: a coarse-to-fine grid search)
-    frame_k = hold_indices(n, rate_hz, camera_hz)[1]
-    frame_k = frame_k[followed[frame_k]]
+    first = hold_indices(n, rate_hz, camera_hz)[1]  # the 1 kHz sample of each frame
+    frame_k = first[followed[first]]
     p_ref = _centre_in_view(p_ref, R_cam[frame_k], p_cam[frame_k] - c[frame_k], Kt, (w, h))
     if s.moving:
         arm = TwoLinkArm(*cfg["two_link_lengths"])
@@ -552,6 +552,8 @@ def testbed(
                 f"the two-link robot cannot follow the marker's path: out of reach at "
                 f"t = {ts_np[k]:.3f} s. "
             )
+        # an infeasible set is not run: reachable stand-in positions keep the (unused)
+        # inverse kinematics from raising
         rel = np.where(feasible, rel, np.array([l1, l2]) * 0.5 + np.array([0.1, 0.0]))
         q_arm = np.asarray(jax.vmap(lambda p: arm.inverse(p, elbow=1))(jnp.asarray(rel)))
         p_xy = base + np.asarray(jax.vmap(arm.forward)(jnp.asarray(q_arm)))
@@ -563,7 +565,6 @@ def testbed(
     position = np.einsum("nji,nj->ni", R_cam, p_obj - p_cam)  # section 5.1, in m
 
     # 3. the camera: frames, the exact projection of the marker's centre, the encoders
-    held, first = hold_indices(n, rate_hz, camera_hz)
     cam = position[first]
     pixels_true = (cam[:, :2] / cam[:, 2:]) @ Kt[:2, :2].T + Kt[:2, 2]
     u_true = np.asarray(jax.vmap(u_fn)(ts))
