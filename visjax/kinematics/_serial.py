@@ -59,6 +59,14 @@ def link_transform(a, alpha, S, theta) -> Float[Array, "4 4"]:
     )
 
 
+def _jacobian(Ts):
+    """Eq. (4.4) from the joint frames $T_F^i$ (n, 4, 4): column $i$ is
+    $[S_i \\times (P_n - P_i); S_i]$."""
+    S, P = Ts[:, :3, 2], Ts[:, :3, 3]
+    linear = jnp.cross(S, P[-1][None, :] - P)
+    return jnp.concatenate([linear, S], axis=1).T
+
+
 @final
 class InverseVelocity(eqx.Module):
     """What `SerialChain.inverse_velocity` returns.
@@ -160,10 +168,7 @@ class SerialChain(eqx.Module):
         Column $i$ is $[S_i \\times (P_n - P_i); S_i]$ with $S_i$ and $P_i$ the third and
         fourth columns of $T_F^i$: $V_n$ is the velocity of the last frame's origin $P_n$.
         """
-        Ts = self.frames(q)
-        S, P = Ts[:, :3, 2], Ts[:, :3, 3]
-        linear = jnp.cross(S, P[-1][None, :] - P)
-        return jnp.concatenate([linear, S], axis=1).T
+        return _jacobian(self.frames(q))
 
     def tool_twist(
         self, q: Float[ArrayLike, " n"], qdot: Float[ArrayLike, " n"], *, local: bool = False
@@ -175,10 +180,10 @@ class SerialChain(eqx.Module):
         ($R_F^{nT} V$, $R_F^{nT}\\omega$): for a camera on the tool, the camera velocities
         $u = [v_c, \\omega]$ of the thesis' eq. (2.11).
         """
-        q = self._q(q)
         qdot = self._q(qdot, "qdot")
-        R = self.forward(q)[:3, :3]
-        twist = self.jacobian(q) @ qdot
+        Ts = self.frames(q)
+        R = Ts[-1, :3, :3]
+        twist = _jacobian(Ts) @ qdot
         V_n, w = twist[:3], twist[3:]
         V_tool = V_n + jnp.cross(w, R @ self.tool)  # eq. (4.5)
         if local:
@@ -217,16 +222,15 @@ class SerialChain(eqx.Module):
                 f"inverse velocity kinematics (4.6) needs a square Jacobian (6 joints); this "
                 f"chain has {self.n_joints}."
             )
-        q = self._q(q)
         twist = as_float(twist)
         check_shape(twist, (6,), "twist")
-        T = self.forward(q)
-        R = T[:3, :3]
+        Ts = self.frames(q)
+        R = Ts[-1, :3, :3]
         V_tool, w = twist[:3], twist[3:]
         if local:
             V_tool, w = R @ V_tool, R @ w
         V_n = V_tool - jnp.cross(w, R @ self.tool)  # eq. (4.6), the bracket
-        J = self.jacobian(q)
+        J = _jacobian(Ts)
         sigma = jnp.linalg.svd(jax.lax.stop_gradient(J), compute_uv=False)
         sigma_min = sigma[-1]
         singular = ~(sigma_min >= min_singular_value)  # NaN counts as singular
