@@ -353,7 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     tr = sub.add_parser(
         "track",
-        help="a video to pixel tracks: KLT with a forward-backward check (thesis sec. 2.4)",
+        help="a video to pixel tracks: KLT with a forward-backward check (Jang's thesis, "
+        "section 2.4)",
     )
     tr.add_argument("video", help="the video (MP4 or anything OpenCV reads, or .npz)")
     tr.add_argument(
