@@ -258,12 +258,18 @@ def test_a_plane_crossing_the_camera_plane_is_drawn_only_in_front():
     assert rows[33:].min() == 200  # the floor
 
 
-def test_aruco_detector_finds_the_rendered_marker_corners():
-    tex, corners = fiducial_marker(7, cell=12)
+def _marker(marker_id):
+    """An ArUco marker 35 cm in front of the table, tilted by 0.35 rad, and its corners in
+    texture coordinates."""
+    tex, corners = fiducial_marker(marker_id, cell=12)
     T = np.eye(4)
     T[:3, :3] = _rot([0.2, 1.0, 0.0], 0.35)
     T[:3, 3] = [-0.08, -0.05, -0.35]
-    marker = Plane(tex, 0.0015, T)
+    return Plane(tex, 0.0015, T), corners
+
+
+def test_aruco_detector_finds_the_rendered_marker_corners():
+    marker, corners = _marker(7)
     world = marker.world_points(corners)
     frames = np.stack([_render(k, [_table(), marker]) for k in range(6)])
     ids, found = detect_aruco(frames[0])
@@ -282,11 +288,7 @@ def test_aruco_detector_finds_the_rendered_marker_corners():
 
 
 def test_track_marker_follows_refines_and_recovers_the_marker():
-    tex, corners = fiducial_marker(3, cell=12)
-    T = np.eye(4)
-    T[:3, :3] = _rot([0.2, 1.0, 0.0], 0.35)
-    T[:3, 3] = [-0.08, -0.05, -0.35]
-    marker = Plane(tex, 0.0015, T)
+    marker, corners = _marker(3)
     world = np.vstack([marker.world_points(corners), marker.world_points(corners.mean(0)[None])])
     # a grey card passes in front of the marker in frames 10-13
     card = Plane(np.full((40, 40), 128, np.uint8), 0.004, _translation([-0.12, -0.1, -0.5]))
