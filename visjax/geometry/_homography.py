@@ -71,6 +71,27 @@ def _min_triangle_area(q):
     return 0.5 * jnp.min(jnp.abs(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0]))
 
 
+_SQUARE = jnp.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
+def _adjugate(B):
+    """The adjugate of a 3x3 matrix, $\\mathrm{adj}(B) = \\det(B) B^{-1}$: its rows are the
+    cross products of $B$'s columns (polynomial, so smooth everywhere)."""
+    c0, c1, c2 = B[:, 0], B[:, 1], B[:, 2]
+    return jnp.stack([jnp.cross(c1, c2), jnp.cross(c2, c0), jnp.cross(c0, c1)])
+
+
+def _projective_basis(q):
+    """$B$ (3, 3) with $B e_i \\sim p_i$ ($i = 1, 2, 3$) and $B (e_1 + e_2 + e_3) \\sim p_4$ for
+    four points `q` (4, 2), no three collinear: the columns $p_1, p_2, p_3$ (homogeneous)
+    scaled by $\\lambda = \\mathrm{adj}([p_1 p_2 p_3])\\, p_4 \\propto [p_1 p_2 p_3]^{-1} p_4$.
+    The homography of four correspondences is then $B_{cur} B_{ref}^{-1}
+    \\propto B_{cur}\\, \\mathrm{adj}(B_{ref})$, the same as the exact DLT of eq. (17)."""
+    P = jnp.concatenate([q, jnp.ones((4, 1), q.dtype)], axis=1)
+    B = P[:3].T
+    return B * (_adjugate(B) @ P[3])[None, :]
+
+
 def _design(q_ref, q_cur):
     """The 2n x 8 inhomogeneous DLT system $M h = b$ for $\\hat g_{33} = 1$.
 
@@ -105,11 +126,6 @@ def _dlt(p_ref, p_cur, visible=None):
 
     c_ref, s_ref, q_ref = _normalising_transform(p_ref, w)
     c_cur, s_cur, q_cur = _normalising_transform(p_cur, w)
-    M, b = _design(q_ref, q_cur)
-    if w is not None:
-        ww = jnp.concatenate([w, w])
-        M, b = M * ww[:, None], b * ww
-
     tol = _rcond_tol(dtype)
     if n == 4 and visible is not None:
         # four points, one of them out of view: no homography
@@ -123,9 +139,19 @@ def _dlt(p_ref, p_cur, visible=None):
         # of order 1); cheaper and sharper than a condition number.
         degenerate = _min_triangle_area(q_ref) < tol
         degenerate = degenerate | (_min_triangle_area(q_cur) < tol)
-        M_safe = jnp.where(degenerate | nonfinite, jnp.eye(8, dtype=dtype), M)
-        h = jnp.linalg.solve(M_safe, b)
+        # the projective-basis construction in closed form (two 3x3 adjugates) instead of
+        # solving the 8x8 system; degenerate inputs are swapped for a square first, so
+        # that neither the value nor the gradient is NaN (the result code says "bad")
+        swap = degenerate | nonfinite
+        q_ref_safe = jnp.where(swap, _SQUARE.astype(dtype), q_ref)
+        q_cur_safe = jnp.where(swap, _SQUARE.astype(dtype), q_cur)
+        G_hat = _projective_basis(q_cur_safe) @ _adjugate(_projective_basis(q_ref_safe))
+        G_hat = G_hat / jnp.sqrt(jnp.sum(G_hat**2))  # its scale is arbitrary: unit norm
     else:
+        M, b = _design(q_ref, q_cur)
+        if w is not None:
+            ww = jnp.concatenate([w, w])
+            M, b = M * ww[:, None], b * ww
         # Over-determined: degeneracy from the conditioning of the normalized design (a
         # predicate only: no gradient flows through the singular values). Least squares by
         # QR: unlike an SVD or eigh of M^T M, its derivative exists when singular values
@@ -136,7 +162,7 @@ def _dlt(p_ref, p_cur, visible=None):
         M_safe = jnp.where(degenerate | nonfinite, M_dummy, M)
         Q, Rq = jnp.linalg.qr(M_safe)
         h = jsl.solve_triangular(Rq, Q.T @ b, lower=False)
-    G_hat = jnp.concatenate([h, jnp.ones((1,), dtype)]).reshape(3, 3)
+        G_hat = jnp.concatenate([h, jnp.ones((1,), dtype)]).reshape(3, 3)
     # Points collinear in one image only can still give a solvable system, but its
     # solution is a singular G: no homography maps them.
     G_hat_ng = jax.lax.stop_gradient(G_hat)
