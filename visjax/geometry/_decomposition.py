@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._small import det2, det3, inv2, inv3
 from .._util import as_float, check_shape
 
 
@@ -43,7 +44,7 @@ def _rotation_tol(dtype) -> float:
 
 def _det_sign(H):
     Hs, _ = _prescale(H)  # no overflow of the determinant in float32
-    return jnp.where(jnp.linalg.det(Hs) < 0.0, -1.0, 1.0).astype(H.dtype)
+    return jnp.where(det3(Hs) < 0.0, -1.0, 1.0).astype(H.dtype)
 
 
 def _decompose_core(H):
@@ -60,7 +61,7 @@ def _decompose_unscaled(H):
     dtype = H.dtype
     eye = jnp.eye(3, dtype=dtype)
     M = H.T @ H
-    cube = jnp.abs(jnp.linalg.det(H)) ** (1.0 / 3.0)
+    cube = jnp.abs(det3(H)) ** (1.0 / 3.0)
     cube = jnp.where(cube > 0.0, cube, 1.0)
     dev = jnp.max(jnp.abs(jax.lax.stop_gradient(M / cube**2) - eye))
     # explicit finiteness: a max over a large vmap batch can drop a NaN
@@ -110,7 +111,7 @@ def _check_H_K(H, K):
         check_shape(K, (3, 3), "K")
         dtype = jnp.result_type(H, K)
         H, K = H.astype(dtype), K.astype(dtype)
-        H = jnp.linalg.solve(K, H @ K)  # K^{-1} H K: the Euclidean homography (eq. (16))
+        H = inv3(K) @ (H @ K)  # K^{-1} H K: the Euclidean homography (eq. (16))
     return H
 
 
@@ -156,9 +157,9 @@ def _plane_basis(n):
 
 def _inv_sqrt_2x2(S):
     """$S^{-1/2}$ of a 2x2 symmetric positive definite matrix, in closed form."""
-    rd = jnp.sqrt(jnp.linalg.det(S))
+    rd = jnp.sqrt(det2(S))
     root = (S + rd * jnp.eye(2, dtype=S.dtype)) / jnp.sqrt(jnp.trace(S) + 2.0 * rd)
-    return jnp.linalg.inv(root)
+    return inv2(root)
 
 
 def _prescale(H):
@@ -181,7 +182,7 @@ def _known_normal_unscaled(H, n):
     a, b = _plane_basis(n)
     Mab = H @ jnp.stack([a, b], axis=1)  # = [R a, R b] * scale for exact data
     S = Mab.T @ Mab
-    scale = jnp.linalg.det(S) ** 0.25
+    scale = det2(S) ** 0.25
     Q = (Mab / scale) @ _inv_sqrt_2x2(S / scale**2)  # nearest orthonormal pair
     qa, qb = Q[:, 0], Q[:, 1]
     R = jnp.outer(qa, a) + jnp.outer(qb, b) + jnp.outer(jnp.cross(qa, qb), n)

@@ -15,6 +15,7 @@ import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, intrinsics_ok, raise_or_keep
+from .._small import adjugate3, det3, inv3, mm, mv
 from .._util import as_float, check_points, check_shape
 from ._camera import to_homogeneous
 
@@ -64,21 +65,18 @@ def _similarity_inv(s, c):
 
 
 def _min_triangle_area(q):
-    """The smallest of the four triangle areas of four 2D points."""
-    tri = jnp.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
-    a, b, c = q[tri[:, 0]], q[tri[:, 1]], q[tri[:, 2]]
-    ab, ac = b - a, c - a
-    return 0.5 * jnp.min(jnp.abs(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0]))
+    """The smallest of the four triangle areas of four 2D points (no gather: slices)."""
+
+    def area(a, b, c):
+        ab, ac = b - a, c - a
+        return jnp.abs(ab[0] * ac[1] - ab[1] * ac[0])
+
+    p0, p1, p2, p3 = q[0], q[1], q[2], q[3]
+    areas = (area(p0, p1, p2), area(p0, p1, p3), area(p0, p2, p3), area(p1, p2, p3))
+    return 0.5 * jnp.minimum(jnp.minimum(areas[0], areas[1]), jnp.minimum(areas[2], areas[3]))
 
 
 _SQUARE = jnp.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-
-
-def _adjugate(B):
-    """The adjugate of a 3x3 matrix, $\\mathrm{adj}(B) = \\det(B) B^{-1}$: its rows are the
-    cross products of $B$'s columns (polynomial, so smooth everywhere)."""
-    c0, c1, c2 = B[:, 0], B[:, 1], B[:, 2]
-    return jnp.stack([jnp.cross(c1, c2), jnp.cross(c2, c0), jnp.cross(c0, c1)])
 
 
 def _projective_basis(q):
@@ -89,7 +87,7 @@ def _projective_basis(q):
     \\propto B_{cur}\\, \\mathrm{adj}(B_{ref})$, the same as the exact DLT of eq. (17)."""
     P = jnp.concatenate([q, jnp.ones((4, 1), q.dtype)], axis=1)
     B = P[:3].T
-    return B * (_adjugate(B) @ P[3])[None, :]
+    return B * mv(adjugate3(B), P[3])[None, :]
 
 
 def _design(q_ref, q_cur):
@@ -145,7 +143,7 @@ def _dlt(p_ref, p_cur, visible=None):
         swap = degenerate | nonfinite
         q_ref_safe = jnp.where(swap, _SQUARE.astype(dtype), q_ref)
         q_cur_safe = jnp.where(swap, _SQUARE.astype(dtype), q_cur)
-        G_hat = _projective_basis(q_cur_safe) @ _adjugate(_projective_basis(q_ref_safe))
+        G_hat = mm(_projective_basis(q_cur_safe), adjugate3(_projective_basis(q_ref_safe)))
         G_hat = G_hat / jnp.sqrt(jnp.sum(G_hat**2))  # its scale is arbitrary: unit norm
     else:
         M, b = _design(q_ref, q_cur)
@@ -166,12 +164,10 @@ def _dlt(p_ref, p_cur, visible=None):
     # Points collinear in one image only can still give a solvable system, but its
     # solution is a singular G: no homography maps them.
     G_hat_ng = jax.lax.stop_gradient(G_hat)
-    degenerate = degenerate | ~(
-        jnp.abs(jnp.linalg.det(G_hat_ng)) > tol * jnp.sum(G_hat_ng**2) ** 1.5
-    )
+    degenerate = degenerate | ~(jnp.abs(det3(G_hat_ng)) > tol * jnp.sum(G_hat_ng**2) ** 1.5)
 
     # Undo the normalisations: G = T_cur^{-1} G_hat T_ref.
-    G = _similarity_inv(s_cur, c_cur) @ G_hat @ _similarity(s_ref, c_ref)
+    G = mm(mm(_similarity_inv(s_cur, c_cur), G_hat), _similarity(s_ref, c_ref))
 
     bad = degenerate | nonfinite | ~n_visible_ok
     G = jnp.where(bad, jnp.eye(3, dtype=dtype), G)
@@ -289,7 +285,7 @@ def euclidean_homography(
     check_shape(A, (3, 3), "A")
     ok = intrinsics_ok(A)
     A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))  # no inf, no NaN gradient
-    return jnp.where(ok, jnp.linalg.solve(A, G @ A), jnp.nan)
+    return jnp.where(ok, inv3(A) @ (G @ A), jnp.nan)
 
 
 def projective_homography(
@@ -306,4 +302,4 @@ def projective_homography(
     check_shape(A, (3, 3), "A")
     ok = intrinsics_ok(A)
     A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))
-    return jnp.where(ok, A @ jnp.linalg.solve(A.T, H.T).T, jnp.nan)
+    return jnp.where(ok, A @ H @ inv3(A), jnp.nan)
