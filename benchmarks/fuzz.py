@@ -891,7 +891,7 @@ def fuzz_streams(n, seed, dtype):
         )
         return stream
 
-    build_fixed = _vm(lambda *a: fixed(*a).ys)
+    build_fixed = _vm(lambda *a: fixed(*a).measured().ys)
     run_fixed = _vm(lambda *a: run_result(est_v)(fixed(*a)))
     tol_e = 1e-7 if dtype == "float64" else 5e-2
     for kind in KINDS:

@@ -166,9 +166,8 @@ def velocity_report(
 def _stable_dt(estimator, stream, y0=None):
     """`None` (integrate at the sample times) when every sample interval is within the
     Euler bound of the gains, else a step of half the bound (samples held between)."""
-    import jax
 
-    y0 = jax.tree_util.tree_map(lambda x: x[0], stream.ys) if y0 is None else y0
+    y0 = stream.measurement(0) if y0 is None else y0
     bound = float(estimator.max_stable_dt(y0))
     longest = float(np.max(np.diff(np.asarray(stream.ts))))
     return None if longest <= bound else 0.5 * bound

@@ -126,7 +126,7 @@ def test_settles_from_a_wrong_initial_estimate(sc1k):
     """Started with v_hat(0) = 0.5 on every axis (true: 0), the error decays to the band."""
     est = VelocityEstimator(K=K, rho=RHO)
     stream = _stream(sc1k)
-    y0 = jax.tree_util.tree_map(lambda x: x[0], stream.ys)
+    y0 = stream.measurement(0)
     state0 = VelocityState(e_hat=y0.e, eta=y0.J @ jnp.full(6, 0.5))  # kappa_hat(0) = J v, (40)
     sol = run(est, stream, saveat=SaveAt(every=10), state0=state0)
     err = np.abs(np.asarray(sol.outputs.v_hat) - np.asarray(sc1k.velocity[::10]))

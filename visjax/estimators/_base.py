@@ -9,7 +9,9 @@ sample arrives, checks the state after every step, and returns a `Solution` that
 carries a result code.
 """
 
+import functools
 import math
+from collections.abc import Callable
 from typing import final
 
 import diffrax
@@ -94,19 +96,54 @@ class Stream(eqx.Module):
     **Fields:**
 
     - `ts`: sample times, shape (N,), increasing (any rate, not necessarily uniform).
-    - `ys`: the measurements the estimator sees, a pytree of arrays of leading size N.
+    - `ys`: the measurements the estimator sees, a pytree of arrays of leading size N; or,
+        with `measure`, the raw samples the measurements are computed from.
     - `truth`: optional ground truth of leading size N, never shown to the estimator; a
         `reducer` of `run` receives it (to accumulate errors without saving outputs).
     - `present`: optional boolean (N,): `False` marks a dropped sample (a frame lost, a
         tracked point occluded). `run` treats it as if it never arrived: the estimator goes
         on holding the latest present sample and no `jump` fires. Sample 0 must be
         present. `None`: every sample is present.
+    - `measure`: optional per-sample preprocessing, a callable (an `eqx.Module`, so that
+        its constants are leaves: gradients flow through them and a new value never
+        recompiles) mapping one raw sample of `ys` to the estimator's measurement. `run`
+        applies it in chunks fused with the time loop (`jax.vmap` over the samples of a
+        chunk, then the steps of that chunk), so the prepared measurements of the whole
+        trajectory never exist at once: peak memory does not grow with the trajectory's
+        length beyond what is saved. `None`: `ys` are the measurements.
+    - `chunk`: the number of integration steps per chunk when `measure` is given (static).
+        Larger chunks amortise the loop's per-chunk overhead; under `vmap` over B streams
+        a chunk holds B x `chunk` prepared samples.
     """
 
     ts: Float[Array, " N"]
     ys: PyTree
     truth: PyTree = None
     present: Bool[Array, " N"] | None = eqx.field(default=None, converter=_as_flags)
+    measure: Callable | None = None
+    chunk: int = eqx.field(default=256, static=True)
+
+    def __check_init__(self):
+        if not (isinstance(self.chunk, int) and self.chunk >= 1):
+            raise ValueError(f"`Stream.chunk` must be a positive int; got {self.chunk!r}.")
+        if self.measure is not None and not callable(self.measure):
+            raise ValueError(
+                f"`Stream.measure` must be callable; got {type(self.measure).__name__}."
+            )
+
+    def measurement(self, k) -> PyTree:
+        """The measurement of sample `k` (`measure` applied to the raw sample, if any)."""
+        raw = jax.tree_util.tree_map(lambda x: x[k], self.ys)
+        return raw if self.measure is None else self.measure(raw)
+
+    def measured(self, batch_size: int | None = None) -> "Stream":
+        """The same stream with every measurement prepared (`measure` applied to every
+        sample, `batch_size` at a time: `jax.lax.map`), e.g. to inspect them or to feed a
+        batch method; the identity without `measure`. Memory: N prepared samples."""
+        if self.measure is None:
+            return self
+        ys = jax.lax.map(self.measure, self.ys, batch_size=batch_size or self.chunk)
+        return Stream(ts=self.ts, ys=ys, truth=self.truth, present=self.present)
 
 
 @final
@@ -396,14 +433,52 @@ def run(
     present0 = None if stream.present is None else _concrete(stream.present[0])
     if present0 is not None and not present0:
         raise ValueError("`stream.present[0]` is False: the first sample must be present.")
-    y0 = jax.tree_util.tree_map(lambda x: x[0], stream.ys)
+    y0 = stream.measurement(0)
     h_max = jnp.max(jnp.diff(stream.ts)) if dt is None else jnp.asarray(dt)
     _precheck(estimator, y0, h_max, solver)
-    return _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state0, throw)
+    plan = None if stream.measure is None else _chunk_plan(stream, dt, n_steps, saveat, adjoint)
+    return _run(
+        estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint, state0, throw
+    )
+
+
+def _grid_arrivals(ts, dt, steps):
+    """The index of the latest sample at or before each grid time `t_0 + j dt` (NumPy)."""
+    ts = np.asarray(ts, dtype=np.float64)
+    grid = ts[0] + np.asarray(steps, dtype=np.float64) * dt
+    arrived = np.searchsorted(ts, grid + 1e-6 * dt, side="right") - 1
+    return np.clip(arrived, 0, ts.shape[0] - 1)
+
+
+def _chunk_plan(stream, dt, n_steps, saveat, adjoint):
+    """`(steps per chunk, number of full chunks, steps left, samples per chunk, samples of
+    the last partial chunk)` for a stream with `measure`: static sizes, so that every chunk
+    prepares the same number of samples. With `CheckpointAdjoint` the chunks are its
+    checkpointed blocks."""
+    n = jnp.shape(stream.ts)[0]
+    if isinstance(adjoint, CheckpointAdjoint):
+        size = adjoint.steps or max(1, math.isqrt(n_steps))
+    else:
+        size = stream.chunk
+    if saveat.any and saveat.every > 1:
+        # whole saving periods per chunk, so that every chunk saves the same steps
+        size = saveat.every * max(1, round(size / saveat.every))
+    size = min(size, n_steps)
+    nc, rest = divmod(n_steps, size)
+    if dt is None:
+        return size, nc, rest, min(size, n), min(max(rest, 1), n)
+    ts = _concrete(stream.ts)  # concrete: `_n_steps` has checked
+    arrived = _grid_arrivals(ts, dt, np.arange(n_steps))
+    # the samples a chunk needs; 2 spare for rounding between NumPy and the traced grid
+    full = arrived[: nc * size].reshape(nc, size) if nc else np.zeros((0, 1), int)
+    span = int((full[:, -1] - full[:, 0]).max()) + 3 if nc else 1
+    tail = arrived[nc * size :]
+    span_tail = int(tail[-1] - tail[0]) + 3 if rest else 1
+    return size, nc, rest, min(span, n), min(span_tail, n)
 
 
 @eqx.filter_jit
-def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state0, throw):
+def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint, state0, throw):
     ts, ys, truth = stream.ts, stream.ys, stream.truth
     n = ts.shape[0]
     last = n_steps - 1
@@ -444,7 +519,23 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
     def at(tree, k):
         return jax.tree_util.tree_map(lambda x: x[k], tree)
 
-    y0 = at(ys, 0)
+    lazy = stream.measure is not None
+    if lazy:
+        size, nc, rest, span, span_tail = plan
+
+        def prepare(j0, span):
+            """The measurements of the `span` samples from the one held at step `j0`."""
+            start = jnp.clip(arrived_sample(j0), 0, n - span)
+            raw = jax.tree_util.tree_map(lambda x: jax.lax.dynamic_slice_in_dim(x, start, span), ys)
+            return start, jax.vmap(stream.measure)(raw)
+
+        # the first chunk is prepared before the loop, and the initial state is built from
+        # its first sample: the same value the loop holds, to the last bit (the sign-based
+        # laws start from e - e_hat = 0 exactly)
+        first = prepare(jnp.zeros((), jnp.int32), span)
+        y0 = at(first[1], 0)
+    else:
+        y0 = at(ys, 0)
     state = estimator.init(y0) if state0 is None else state0
 
     # gains and constants, and the step against the declared stability bound
@@ -471,12 +562,16 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
 
     has_jump = type(estimator).jump is not AbstractEstimator.jump
 
-    def step(carry, save: bool):
-        state_in, acc, r, failed, j, k_prev = carry
+    def eager_sample(j, y_held):
+        return at(ys, held_sample(j))
+
+    def step(carry, save: bool, sample):
+        """One integration step; `sample(j, y_held)` is the measurement held at step j."""
+        state_in, acc, r, failed, j, k_prev, y_held = carry
         t0 = grid_time(j)
         t1 = grid_time(jnp.minimum(j + 1, last))  # the last point is not integrated past
         k = held_sample(j)
-        y = at(ys, k)
+        y = sample(j, y_held)
         if has_jump:
             state = jax.lax.cond(
                 k != k_prev, lambda s, y: estimator.jump(s, y), lambda s, y: s, state_in, y
@@ -508,43 +603,90 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
         failed = jnp.where(newly, k, failed).astype(jnp.int32)
         keep = failed >= 0
         state = jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), state_in, s_new)
-        return (state, acc, r, failed, j + 1, k), saved
+        y_held = None if y_held is None else y
+        return (state, acc, r, failed, j + 1, k, y_held), saved
 
-    def plain(c, _):
-        return step(c, False)[0], None
+    def steps(carry, length: int, sample, adjoint):
+        """`length` steps with the saving of `saveat`, the first at the carry's counter."""
 
-    def saving_step(c, _):
-        return step(c, True)
+        def plain(c, _):
+            return step(c, False, sample)[0], None
 
-    carry = (state, acc, r, failed, jnp.zeros((), jnp.int32), jnp.full((), -1, jnp.int32))
-    saving = saveat.any
-    every = saveat.every
-    if not saving:
-        carry, _ = _scan(plain, carry, n_steps, adjoint)
-        saved = None
-    elif every == 1:
-        carry, saved = _scan(saving_step, carry, n_steps, adjoint)
-    else:
+        def saving_step(c, _):
+            return step(c, True, sample)
+
+        if not saveat.any:
+            carry, _ = _scan(plain, carry, length, adjoint)
+            return carry, None
+        every = saveat.every
+        if every == 1:
+            return _scan(saving_step, carry, length, adjoint)
+
         # chunks of `every` steps: the first of each is saved; the others' outputs are not
         # computed at all (unless a reducer needs them)
-        def chunk(length):
+        def chunk(size):
             def chunk_step(c, _):
-                c, out = step(c, True)
-                c, _ = jax.lax.scan(plain, c, None, length=length - 1)
+                c, out = step(c, True, sample)
+                c, _ = jax.lax.scan(plain, c, None, length=size - 1)
                 return c, out
 
             return chunk_step
 
-        nc, rest = divmod(n_steps, every)
-        carry, saved = _scan(chunk(every), carry, nc, adjoint)
+        nc, rest = divmod(length, every)
+        saved = None
+        if nc:
+            carry, saved = _scan(chunk(every), carry, nc, adjoint)
         if rest:
             carry, tail = chunk(rest)(carry, None)
-            saved = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), saved, tail)
-    state, acc, r, failed, _, _ = carry
+            tail = jax.tree_util.tree_map(lambda b: b[None], tail)
+            saved = tail if saved is None else _concat(saved, tail)
+        return carry, saved
+
+    y_held0 = y0 if (lazy and stream.present is not None) else None
+    carry = (state, acc, r, failed, jnp.zeros((), jnp.int32), jnp.full((), -1, jnp.int32), y_held0)
+    if not lazy:
+        carry, saved = steps(carry, n_steps, eager_sample, adjoint)
+    else:
+
+        def held_from(prepared):
+            start, local = prepared
+
+            def sample(j, y_held):
+                ka = arrived_sample(j)
+                y = at(local, ka - start)
+                if y_held is None:
+                    return y
+                # a dropped sample: the latest present one goes on being held
+                return jax.tree_util.tree_map(
+                    lambda a, b: jnp.where(stream.present[ka], a, b), y, y_held
+                )
+
+            return sample
+
+        def one_chunk(c, _):
+            return steps(c, size, held_from(prepare(c[4], span)), DirectAdjoint())
+
+        if isinstance(adjoint, CheckpointAdjoint):
+            one_chunk = jax.checkpoint(one_chunk)
+        carry, saved = steps(carry, size, held_from(first), DirectAdjoint())
+        parts = [saved]
+        if nc > 1:
+            carry, more = jax.lax.scan(one_chunk, carry, None, length=nc - 1)
+            if more is not None:
+                more = jax.tree_util.tree_map(
+                    lambda y: y.reshape((y.shape[0] * y.shape[1],) + y.shape[2:]), more
+                )
+            parts.append(more)
+        if rest:
+            prepared = prepare(carry[4], span_tail)
+            carry, tail = steps(carry, rest, held_from(prepared), DirectAdjoint())
+            parts.append(tail)
+        saved = None if saved is None else functools.reduce(_concat, parts)
+    state, acc, r, failed = carry[:4]
     outputs, diagnostics, states = (None, None, None) if saved is None else saved
     saved_ts = None
-    if saving:
-        saved_ts = jax.vmap(grid_time)(jnp.arange(0, n_steps, every, dtype=jnp.int32))
+    if saveat.any:
+        saved_ts = jax.vmap(grid_time)(jnp.arange(0, n_steps, saveat.every, dtype=jnp.int32))
     sol = Solution(
         ts=saved_ts,
         outputs=outputs,
@@ -560,3 +702,7 @@ def _run(estimator, stream, dt, n_steps, solver, saveat, reducer, adjoint, state
             sol = eqx.error_if(sol, ~jnp.all(ok), f"{type(estimator).__name__}: {message}")
         sol = r.error_if(sol, r != RESULTS.successful)
     return sol
+
+
+def _concat(a, b):
+    return jax.tree_util.tree_map(lambda x, y: jnp.concatenate([x, y]), a, b)

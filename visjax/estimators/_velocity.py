@@ -22,6 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, raise_or_keep
+from .._small import inv3
 from .._util import as_float, check_points, check_shape, positive_finite
 from ..geometry import (
     L_omega,
@@ -114,7 +115,7 @@ def kinematics_jacobian(
     zero = jnp.zeros((3, 3), dtype)
     J = jnp.block([[B, -B @ Rs], [zero, Lw]])
     Lv_inv = jnp.eye(3, dtype=dtype).at[0, 2].set(m1[0]).at[1, 2].set(m1[1])
-    B_inv = (z1_star / alpha1) * (Lv_inv @ jnp.linalg.inv(Ae))
+    B_inv = (z1_star / alpha1) * (Lv_inv @ inv3(Ae))
     Lw_inv = L_omega_inv(e_omega)
     J_inv = jnp.block([[B_inv, Rs @ Lw_inv], [zero, Lw_inv]])
     return J, J_inv
@@ -369,16 +370,15 @@ def plane_normal_from_frames(
 
 @eqx.filter_jit
 def _normal_from_frames(p_ref, p_frames, A, n_prior, visible):
-    if visible is None:
-        rec = jax.vmap(lambda pc: euclidean_reconstruction(p_ref, pc, A, n_prior, throw=False))(
-            p_frames
-        )
-    else:
-        rec = jax.vmap(
-            lambda pc, v: euclidean_reconstruction(p_ref, pc, A, n_prior, visible=v, throw=False)
-        )(p_frames, visible)
-    w = jnp.where(rec.result == RESULTS.successful, jnp.sum(rec.x_h**2, axis=-1), 0.0)
-    n = jnp.sum(w[:, None] * rec.n_star, axis=0)
+    def weighted(args):
+        pc, v = args
+        rec = euclidean_reconstruction(p_ref, pc, A, n_prior, visible=v, throw=False)
+        w = jnp.where(rec.result == RESULTS.successful, jnp.sum(rec.x_h**2), 0.0)
+        return w, w * rec.n_star
+
+    # 256 frames at a time: the reconstructions of a long run never exist all at once
+    w, wn = jax.lax.map(weighted, (p_frames, visible), batch_size=256)
+    n = jnp.sum(wn, axis=0)
     n = eqx.error_if(
         n, ~(jnp.sum(w) > 0.0), "No frame moves away from the reference pose: n* is unobservable."
     )
@@ -494,18 +494,44 @@ class VelocityEstimator(AbstractEstimator):
         return big < self.bound
 
 
-@eqx.filter_jit
-def _measure_frames(p_ref, pixels, A, R_star, s1, z1_star, n_star, visible, throw):
-    """`velocity_measurements` of every frame, vmapped (compiled once per shape)."""
-    if visible is None:
-        return jax.vmap(
-            lambda pc: velocity_measurements(p_ref, pc, A, R_star, s1, z1_star, n_star, throw=throw)
-        )(pixels)
-    return jax.vmap(
-        lambda pc, v: velocity_measurements(
-            p_ref, pc, A, R_star, s1, z1_star, n_star, visible=v, throw=False
+@final
+class FrameMeasure(eqx.Module):
+    """`velocity_measurements` of one frame with the scene's constants: the `measure` of a
+    `fixed_camera_stream`, applied by `run` in chunks fused with the time loop.
+
+    **Fields:** `p_ref`, `A`, `R_star`, `s1`, `z1_star`, `n_star` as in
+    `velocity_measurements`; `dropouts` (static): a NaN pixel is a feature out of view.
+    Calling it on a frame's pixels (n, 2) returns its `VelocityMeasurement` (never raises:
+    a failed frame is all NaN with its `result`).
+    """
+
+    p_ref: Float[Array, "n 2"] = eqx.field(converter=as_float)
+    A: Float[Array, "3 3"] = eqx.field(converter=as_float)
+    R_star: Float[Array, "3 3"] = eqx.field(converter=as_float)
+    s1: Float[Array, "3"] = eqx.field(converter=as_float)
+    z1_star: Float[Array, ""] = eqx.field(converter=as_float)
+    n_star: Float[Array, "3"] = eqx.field(converter=as_float)
+    dropouts: bool = eqx.field(default=False, static=True)
+
+    def __call__(self, pixels: Float[Array, "n 2"]) -> VelocityMeasurement:
+        visible = jnp.all(jnp.isfinite(pixels), axis=-1) if self.dropouts else None
+        return velocity_measurements(
+            self.p_ref,
+            pixels,
+            self.A,
+            self.R_star,
+            self.s1,
+            self.z1_star,
+            self.n_star,
+            visible=visible,
+            throw=False,
         )
-    )(pixels, visible)
+
+
+@eqx.filter_jit
+def _frame_results(measure, pixels, batch_size):
+    """The result code of every frame, `batch_size` frames at a time (nothing else kept)."""
+    return jax.lax.map(lambda pc: measure(pc).result, pixels, batch_size=batch_size)
 
 
 def fixed_camera_stream(
@@ -524,6 +550,7 @@ def fixed_camera_stream(
     dropouts: bool = False,
     truth=None,
     throw: bool = True,
+    chunk: int = 256,
 ):
     """The measurement `Stream` of the velocity estimator from raw pixel frames.
 
@@ -535,11 +562,18 @@ def fixed_camera_stream(
     is given): by `depth_from_feature_length` when `known_length = (i, j, L)`
     names two features and their distance (the paper's premise; any coplanar set), else by
     `depth_from_known_length` with the origin's pixel (default: `diagonal_intersection` of
-    the four reference features). Then $e$, $J$, $J^{-1}$ of every frame, vmapped.
+    the four reference features).
+
+    The stream's `ys` are the pixels and its `measure` a `FrameMeasure` of these constants:
+    $e$, $J$, $J^{-1}$ of each frame are computed by `run` in chunks of `chunk` steps fused
+    with the time loop, so a run of any length needs memory for one chunk of prepared
+    frames, not for the whole trajectory (`Stream.measured()` prepares them all, to look
+    at them).
 
     With `throw=False` a frame that cannot be measured (a NaN pixel, degenerate points)
-    is all NaN in the stream, and `run` stops there with `RESULTS.nonfinite_measurement`
-    and its index; with `throw=True` building the stream raises.
+    is all NaN, and `run` stops there with `RESULTS.nonfinite_measurement` and its index;
+    with `throw=True` building the stream raises (one pass over the frames for their
+    result codes, `chunk` at a time).
 
     With `dropouts=True` a NaN pixel is a feature out of view in that frame (the reference
     pixels must all be finite): the homography is fitted to the features seen (with more
@@ -584,14 +618,31 @@ def fixed_camera_stream(
         if origin_pixel is None:
             origin_pixel = diagonal_intersection(p_ref)
         z1_star = depth_from_known_length(p_ref[0], origin_pixel, A, n_star, R_star, s1)
-    ys = _measure_frames(p_ref, pixels, A, R_star, s1, z1_star, n_star, visible, throw)
-    if visible is None:
-        return Stream(ts=ts, ys=ys, truth=truth), n_star, z1_star
-    present = ys.result == RESULTS.successful
-    # the first frame starts the estimator: it must be measured
-    first_ok = present[0]
-    if throw:
-        present = eqx.error_if(
-            present, ~first_ok, "fixed_camera_stream: the first frame cannot be measured."
-        )
-    return Stream(ts=ts, ys=ys, truth=truth, present=present), n_star, z1_star
+    z1_star = as_float(z1_star)
+    measure = FrameMeasure(
+        p_ref=p_ref,
+        A=A,
+        R_star=R_star,
+        s1=s1,
+        z1_star=z1_star,
+        n_star=as_float(n_star),
+        dropouts=dropouts,
+    )
+    present = None
+    if dropouts or throw:
+        # one pass over the frames for their result codes only, `chunk` at a time
+        results = _frame_results(measure, pixels, chunk)
+        if dropouts:
+            present = results == RESULTS.successful
+            # the first frame starts the estimator: it must be measured
+            if throw:
+                present = eqx.error_if(
+                    present, ~present[0], "fixed_camera_stream: the first frame cannot be measured."
+                )
+        else:
+            # the first frame that cannot be measured raises with its own message
+            bad = results != RESULTS.successful
+            first = jax.tree_util.tree_map(lambda v: v[jnp.argmax(bad)], results)
+            pixels = first.error_if(pixels, jnp.any(bad))
+    stream = Stream(ts=ts, ys=pixels, truth=truth, present=present, measure=measure, chunk=chunk)
+    return stream, n_star, z1_star

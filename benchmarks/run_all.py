@@ -1,0 +1,211 @@
+"""Run the performance benchmarks, write their JSON into one file, and regenerate the
+README's performance table from it.
+
+Each benchmark runs in its own process (its memory and compile times its own) and prints
+one JSON document; this collects them under their names in `--out` (default
+`benchmarks/results.json`), with the machine and versions, and then rewrites the table
+between the markers `<!-- performance-table:start -->` and `<!-- performance-table:end -->`
+in README.md from that file alone (`--table-only` redoes the table from an existing file
+without running anything).
+
+    python benchmarks/run_all.py [--quick] [--only NAME ...] [--table-only]
+
+`--quick` runs every benchmark on small sizes (a smoke test of the scripts, minutes);
+the README's numbers come from a full run.
+"""
+
+import argparse
+import datetime
+import json
+import os
+import pathlib
+import platform
+import subprocess
+import sys
+
+HERE = pathlib.Path(__file__).parent
+README = HERE.parent / "README.md"
+START, END = "<!-- performance-table:start -->", "<!-- performance-table:end -->"
+
+# name: (script, full arguments, quick arguments)
+BENCHMARKS = {
+    "homography_decomposition": ("homography_decomposition.py", [], ["--frames", "2000"]),
+    "one_trajectory": ("velocity_benchmark.py", [], ["--batch", "8", "--repeats", "2"]),
+    "monte_carlo": (
+        "monte_carlo.py",
+        ["--batch", "1024"],
+        ["--batch", "32", "--duration", "0.2", "--repeats", "1"],
+    ),
+    "long_run_memory": ("long_run_memory.py", [], ["--steps", "50000"]),
+    "gradient_uncalibrated": (
+        "gradient_uncalibrated.py",
+        [],
+        ["--duration", "1", "--batch", "8"],
+    ),
+    "compile_times": ("compile_times.py", [], []),
+}
+
+
+def run_one(name, quick):
+    script, full, small = BENCHMARKS[name]
+    cmd = [sys.executable, str(HERE / script), *(small if quick else full)]
+    print(f"[run_all] {' '.join(cmd[1:])}", file=sys.stderr, flush=True)
+    out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
+    if out.returncode != 0:
+        return {"error": out.stderr.strip().splitlines()[-20:], "command": cmd[1:]}
+    result = json.loads(out.stdout)
+    result["command"] = " ".join(["python", f"benchmarks/{script}", *cmd[2:]])
+    return result
+
+
+def _fmt(x, digits=3):
+    if x is None:
+        return "n/a"
+    if abs(x) >= 100:
+        return f"{x:,.0f}"
+    return f"{x:.{digits}g}"
+
+
+def _met(ok):
+    return "yes" if ok else "**no**"
+
+
+def table(results: dict) -> str:
+    """The README's performance table (Markdown) from the collected results."""
+    r = results["benchmarks"]
+    rows = []
+    h = r.get("homography_decomposition", {})
+    if "speedup_opencv_over_visjax" in h:
+        ratio = h["speedup_opencv_over_visjax"]
+        rows.append(
+            (
+                f"homography + four-solution decomposition, {h['frames']:,} frames (`jit(vmap)`)",
+                f"{_fmt(h['visjax_us_per_frame'])} µs/frame",
+                f"OpenCV per-frame loop {_fmt(h['opencv_us_per_frame'])} µs/frame",
+                f"{_fmt(ratio)}x faster",
+                ">= 20x",
+                _met(ratio >= 20),
+            )
+        )
+    m = r.get("monte_carlo", {})
+    if "ns_per_trajectory_step" in m:
+        ns = m["ns_per_trajectory_step"]
+        rows.append(
+            (
+                f"Monte-Carlo noise study, per-trajectory reconstruction, batch {m['batch']:,}"
+                f" x {m['steps_per_trajectory']:,} steps",
+                f"{_fmt(ns)} ns per trajectory-step",
+                f"NumPy per-step loop {_fmt(m['numpy_loop_ns_per_step'])} ns/step; "
+                f"the estimator's loop alone {_fmt(m['loop_only_ns_per_trajectory_step'])} ns",
+                f"{_fmt(m['speedup_vs_numpy_loop'])}x the NumPy loop",
+                "<= 300 ns at batch 1,024",
+                _met(ns <= 300 and m["batch"] >= 1024),
+            )
+        )
+    o = r.get("one_trajectory", {})
+    if "speedup_one_vs_numpy" in o:
+        rows.append(
+            (
+                f"one trajectory, {o['samples']:,} steps, preprocessing + estimator",
+                f"{_fmt(o['visjax_one_s'] * 1e3)} ms",
+                f"NumPy per-step loop {_fmt(o['numpy_loop_s'])} s",
+                f"{_fmt(o['speedup_one_vs_numpy'])}x",
+                ">= 150x",
+                _met(o["speedup_one_vs_numpy"] >= 150),
+            )
+        )
+    lr = r.get("long_run_memory", {})
+    if "peak_rss_mb" in lr:
+        rows.append(
+            (
+                f"{lr['long']['steps']:,}-step velocity run, peak resident memory",
+                f"{_fmt(lr['peak_rss_mb'])} MB",
+                f"the same process on {lr['reference']['steps']:,} steps "
+                f"{_fmt(lr['reference']['peak_rss_mb'])} MB",
+                f"+{_fmt(lr['extra_bytes_per_step'])} bytes/step",
+                "< 500 MB at 10^6 steps",
+                _met(lr["peak_rss_mb"] < 500 and lr["long"]["steps"] >= 1_000_000),
+            )
+        )
+    g = r.get("gradient_uncalibrated", {})
+    if "rss_peak_mb" in g:
+        rows.append(
+            (
+                f"reverse-mode gradient, uncalibrated estimator, {g['duration_s']:g} s at 1 kHz"
+                f" x {g['batch']} gain settings (`CheckpointAdjoint`)",
+                f"{_fmt(g['rss_peak_mb'])} MB peak resident",
+                f"the forward run alone {_fmt(g['rss_after_forward_mb'])} MB; "
+                f"`DirectAdjoint` would need {_fmt(g['direct_xla']['temp_size_in_bytes'] / 2**20)}"
+                " MB of buffers",
+                f"{_fmt(g['rss_peak_over_forward'])}x the forward run",
+                "< 4 GB at 30 s x 256",
+                _met(g["rss_peak_mb"] < 4096 and g["duration_s"] >= 30 and g["batch"] >= 256),
+            )
+        )
+    c = r.get("compile_times", {})
+    for row in c.get("results", []):
+        rows.append(
+            (
+                f"compile time, {row['name']}",
+                f"{_fmt(row['compile_s'])} s",
+                f"a bare `lax.scan` of {row['steps']:,} steps {_fmt(row['bare_scan_compile_s'])} s",
+                f"{_fmt(row['compile_over_bare_scan'])}x",
+                "< 5 s",
+                _met(row["compile_s"] < 5),
+            )
+        )
+    lines = [
+        f"Generated by `python benchmarks/run_all.py` from `benchmarks/results.json` "
+        f"({results['machine']}, jax {results['jax']}, {results['date']}"
+        f"{', QUICK sizes' if results.get('quick') else ''}).",
+        "",
+        "| figure | visjax | reference, same run | ratio | target | met |",
+        "|---|---|---|---|---|---|",
+    ]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    failed = [name for name, v in r.items() if "error" in v]
+    if failed:
+        lines += ["", f"Failed to run: {', '.join(failed)}."]
+    return "\n".join(lines)
+
+
+def write_table(results: dict, readme: pathlib.Path = README) -> None:
+    text = readme.read_text()
+    if START not in text or END not in text:
+        raise SystemExit(f"{readme} has no {START} ... {END} markers.")
+    head, rest = text.split(START, 1)
+    _, tail = rest.split(END, 1)
+    readme.write_text(f"{head}{START}\n{table(results)}\n{END}{tail}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=pathlib.Path, default=HERE / "results.json")
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--only", nargs="*", choices=list(BENCHMARKS))
+    parser.add_argument("--table-only", action="store_true")
+    parser.add_argument("--no-readme", action="store_true")
+    args = parser.parse_args()
+    if args.table_only:
+        results = json.loads(args.out.read_text())
+    else:
+        import jax
+
+        previous = json.loads(args.out.read_text()) if args.only and args.out.exists() else {}
+        results = {
+            "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {jax.devices()[0].platform}",
+            "jax": jax.__version__,
+            "date": datetime.date.today().isoformat(),
+            "quick": args.quick,
+            "benchmarks": previous.get("benchmarks", {}),
+        }
+        for name in args.only or BENCHMARKS:
+            results["benchmarks"][name] = run_one(name, args.quick)
+            args.out.write_text(json.dumps(results, indent=2) + "\n")
+    print(json.dumps(results, indent=2))
+    if not args.no_readme:
+        write_table(results)
+
+
+if __name__ == "__main__":
+    main()
