@@ -25,6 +25,7 @@ import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 from visjax.estimators import SaveAt, VelocityEstimator, fixed_camera_stream, run
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63
+from visjax import RESULTS
 
 folder, steps, chunk = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 c = np.load(folder + "/constants.npz")
@@ -42,7 +43,7 @@ print(json.dumps({
     "wall_s": time.perf_counter() - t0,
     "saved": int(v.shape[0]),
     "finite": bool(np.all(np.isfinite(v))),
-    "result": "successful" if sol.result == 0 else "failed",
+    "successful": bool(sol.result == RESULTS.successful),
     "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
 }))
 """

@@ -145,3 +145,23 @@ def test_memory_does_not_grow_with_the_trajectory():
         per_step[prepared] = (long - short) / 4000
     assert per_step[False] < 32, per_step
     assert per_step[True] > 300, per_step
+
+
+def test_frame_measure_under_jit_vmap_grad(streams):
+    """`FrameMeasure` is `velocity_measurements` with the scene's constants: equal values,
+    and its gradient with respect to the pixels (jit of vmap of grad) matches central
+    differences."""
+    lazy, eager = streams
+    m = lazy.measure
+    frames = lazy.ys[100:104]
+    ys = jax.jit(jax.vmap(m))(frames)
+    np.testing.assert_allclose(ys.e, eager.ys.e[100:104], rtol=0, atol=1e-13)
+
+    def f(p):
+        return jnp.sum(m(p).e * jnp.arange(1.0, 7.0))
+
+    g = jax.jit(jax.vmap(jax.grad(f)))(frames)
+    h = 1e-5
+    d = jnp.zeros_like(frames[0]).at[2, 1].set(h)
+    fd = jax.vmap(lambda p: (f(p + d) - f(p - d)) / (2 * h))(frames)
+    np.testing.assert_allclose(g[:, 2, 1], fd, rtol=1e-6, atol=1e-9)

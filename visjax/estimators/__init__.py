@@ -36,6 +36,7 @@ from ._uio import (
     uio_residuals as uio_residuals,
 )
 from ._velocity import (
+    FrameMeasure as FrameMeasure,
     VelocityDiagnostics as VelocityDiagnostics,
     VelocityEstimator as VelocityEstimator,
     VelocityMeasurement as VelocityMeasurement,

@@ -174,7 +174,8 @@ def velocity_measurements(
         rec.result,
         RESULTS.where(ok, RESULTS.successful, RESULTS.singular_jacobian),
     )
-    bad = result != RESULTS.successful
+    # once per frame (a barrier: XLA would recompute it into each of the 90 entries below)
+    bad = jax.lax.optimization_barrier(result != RESULTS.successful)
     e, J, J_inv, R = (jnp.where(bad, jnp.nan, x) for x in (e, J, J_inv, R))
     out = VelocityMeasurement(e=e, J=J, J_inv=J_inv, R=R, result=result)
     return raise_or_keep(result, out, throw)

@@ -61,7 +61,7 @@ def _decompose_unscaled(H):
     dtype = H.dtype
     eye = jnp.eye(3, dtype=dtype)
     M = H.T @ H
-    cube = jnp.abs(det3(H)) ** (1.0 / 3.0)
+    cube = jnp.cbrt(jnp.abs(det3(H)))
     cube = jnp.where(cube > 0.0, cube, 1.0)
     dev = jnp.max(jnp.abs(jax.lax.stop_gradient(M / cube**2) - eye))
     # explicit finiteness: a max over a large vmap batch can drop a NaN
@@ -182,7 +182,7 @@ def _known_normal_unscaled(H, n):
     a, b = _plane_basis(n)
     Mab = H @ jnp.stack([a, b], axis=1)  # = [R a, R b] * scale for exact data
     S = Mab.T @ Mab
-    scale = det2(S) ** 0.25
+    scale = jnp.sqrt(jnp.sqrt(det2(S)))  # det(S)^(1/4); two square roots, not a pow
     Q = (Mab / scale) @ _inv_sqrt_2x2(S / scale**2)  # nearest orthonormal pair
     qa, qb = Q[:, 0], Q[:, 1]
     R = jnp.outer(qa, a) + jnp.outer(qb, b) + jnp.outer(jnp.cross(qa, qb), n)

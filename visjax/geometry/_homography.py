@@ -140,7 +140,9 @@ def _dlt(p_ref, p_cur, visible=None):
         # the projective-basis construction in closed form (two 3x3 adjugates) instead of
         # solving the 8x8 system; degenerate inputs are swapped for a square first, so
         # that neither the value nor the gradient is NaN (the result code says "bad")
-        swap = degenerate | nonfinite
+        # computed once per frame: without the barrier XLA fuses the areas into every
+        # entry of the swapped points below and recomputes them 24 times
+        swap = jax.lax.optimization_barrier(degenerate | nonfinite)
         q_ref_safe = jnp.where(swap, _SQUARE.astype(dtype), q_ref)
         q_cur_safe = jnp.where(swap, _SQUARE.astype(dtype), q_cur)
         G_hat = mm(_projective_basis(q_cur_safe), adjugate3(_projective_basis(q_ref_safe)))
@@ -164,12 +166,13 @@ def _dlt(p_ref, p_cur, visible=None):
     # Points collinear in one image only can still give a solvable system, but its
     # solution is a singular G: no homography maps them.
     G_hat_ng = jax.lax.stop_gradient(G_hat)
-    degenerate = degenerate | ~(jnp.abs(det3(G_hat_ng)) > tol * jnp.sum(G_hat_ng**2) ** 1.5)
+    norm2 = jnp.sum(G_hat_ng**2)
+    degenerate = degenerate | ~(jnp.abs(det3(G_hat_ng)) > tol * norm2 * jnp.sqrt(norm2))
 
     # Undo the normalisations: G = T_cur^{-1} G_hat T_ref.
     G = mm(mm(_similarity_inv(s_cur, c_cur), G_hat), _similarity(s_ref, c_ref))
 
-    bad = degenerate | nonfinite | ~n_visible_ok
+    bad = jax.lax.optimization_barrier(degenerate | nonfinite | ~n_visible_ok)  # once per frame
     G = jnp.where(bad, jnp.eye(3, dtype=dtype), G)
     g33 = G[2, 2]
     # g33 = 0: the image origin maps to infinity. Compared with the other terms of the

@@ -153,9 +153,14 @@ def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     c_safe = jnp.where(use_large, c, -1.0)
     w_safe = vee(R_safe)
     B = 0.5 * (R_safe + R_safe.T) - c_safe * jnp.eye(3, dtype=dtype)  # (1 - c) u u^T
-    k = jnp.argmax(jnp.diag(B))
-    col = B[:, k]
-    u = col / jnp.sqrt(B[k, k] * (1.0 - c_safe))
+    # the column of the largest diagonal entry (the first on ties, as argmax), by selects:
+    # a gather per frame is slow under vmap
+    d = jnp.diag(B)
+    first = (d[0] >= d[1]) & (d[0] >= d[2])
+    second = ~first & (d[1] >= d[2])
+    col = jnp.where(first, B[:, 0], jnp.where(second, B[:, 1], B[:, 2]))
+    b_kk = jnp.where(first, d[0], jnp.where(second, d[1], d[2]))
+    u = col / jnp.sqrt(b_kk * (1.0 - c_safe))
     u = jnp.where(jnp.dot(u, w_safe) >= 0.0, u, -u)
     sw2 = jnp.sum(w_safe**2)
     sw = jnp.where(sw2 > 0.0, jnp.sqrt(jnp.where(sw2 > 0.0, sw2, 1.0)), 0.0)
