@@ -474,7 +474,7 @@ def _chunk_plan(stream, dt, n_steps, saveat, adjoint):
     span = int((full[:, -1] - full[:, 0]).max()) + 3 if nc else 1
     tail = arrived[nc * size :]
     span_tail = int(tail[-1] - tail[0]) + 3 if rest else 1
-    return size, nc, rest, min(span, n), min(span_tail, n)
+    return size, nc, rest, min(max(span, span_tail), n), min(span_tail, n)
 
 
 @eqx.filter_jit
@@ -567,7 +567,11 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
 
     def step(carry, save: bool, sample):
         """One integration step; `sample(j, y_held)` is the measurement held at step j."""
-        state_in, acc, r, failed, j, k_prev, y_held = carry
+        state_in, acc, r, failed, j_count, k_prev, y_held = carry
+        # past the end (the padding of the last chunk) the last step is repeated with a
+        # zero step: the state does not move, the reducer skips it, its saves are dropped
+        active = j_count <= last
+        j = jnp.minimum(j_count, last)
         t0 = grid_time(j)
         t1 = grid_time(jnp.minimum(j + 1, last))  # the last point is not integrated past
         k = held_sample(j)
@@ -582,7 +586,8 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
         if save or reducer is not None:
             out = estimator.output(t0, state, y)
             if reducer is not None:
-                acc = reducer.update(acc, t0, out, at(truth, arrived_sample(j)))
+                new_acc = reducer.update(acc, t0, out, at(truth, arrived_sample(j)))
+                acc = jax.tree_util.tree_map(lambda a, b: jnp.where(active, a, b), new_acc, acc)
             if save:
                 saved = (
                     out if saveat.outputs else None,
@@ -604,7 +609,7 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
         keep = failed >= 0
         state = jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), state_in, s_new)
         y_held = None if y_held is None else y
-        return (state, acc, r, failed, j + 1, k, y_held), saved
+        return (state, acc, r, failed, j_count + 1, k, y_held), saved
 
     def steps(carry, length: int, sample, adjoint):
         """`length` steps with the saving of `saveat`, the first at the carry's counter."""
@@ -670,18 +675,19 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
             one_chunk = jax.checkpoint(one_chunk)
         carry, saved = steps(carry, size, held_from(first), DirectAdjoint())
         parts = [saved]
-        if nc > 1:
-            carry, more = jax.lax.scan(one_chunk, carry, None, length=nc - 1)
+        # the other chunks, the last one padded to `size` steps: one compiled chunk body
+        more_chunks = nc - 1 + (1 if rest else 0)
+        if more_chunks:
+            carry, more = jax.lax.scan(one_chunk, carry, None, length=more_chunks)
             if more is not None:
                 more = jax.tree_util.tree_map(
                     lambda y: y.reshape((y.shape[0] * y.shape[1],) + y.shape[2:]), more
                 )
             parts.append(more)
-        if rest:
-            prepared = prepare(carry[4], span_tail)
-            carry, tail = steps(carry, rest, held_from(prepared), DirectAdjoint())
-            parts.append(tail)
-        saved = None if saved is None else functools.reduce(_concat, parts)
+        if saved is not None:
+            n_saved = len(range(0, n_steps, saveat.every))
+            saved = functools.reduce(_concat, parts)
+            saved = jax.tree_util.tree_map(lambda y: y[:n_saved], saved)
     state, acc, r, failed = carry[:4]
     outputs, diagnostics, states = (None, None, None) if saved is None else saved
     saved_ts = None
