@@ -111,9 +111,10 @@ class Stream(eqx.Module):
         chunk, then the steps of that chunk), so the prepared measurements of the whole
         trajectory never exist at once: peak memory does not grow with the trajectory's
         length beyond what is saved. `None`: `ys` are the measurements.
-    - `chunk`: the number of integration steps per chunk when `measure` is given (static).
-        Larger chunks amortise the loop's per-chunk overhead; under `vmap` over B streams
-        a chunk holds B x `chunk` prepared samples.
+    - `chunk`: the number of integration steps per chunk when `measure` is given (static;
+        with `CheckpointAdjoint` the chunks are its checkpointed blocks instead). Larger
+        chunks amortise the loop's per-chunk overhead; under `vmap` over B streams a chunk
+        holds B x `chunk` prepared samples.
     """
 
     ts: Float[Array, " N"]
