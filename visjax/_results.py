@@ -9,6 +9,8 @@ import diffrax
 import jax
 import jax.numpy as jnp
 
+from ._small import sall
+
 
 class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
     """Why a computation failed, for callers who asked for a result code (`throw=False`).
@@ -83,16 +85,16 @@ def all_finite(tree):
     """Whether every floating entry of a pytree is finite. An explicit `isfinite` test, so
     that no reduction can drop a NaN (XLA's CPU `max` can, in large `vmap` batches)."""
     leaves = [
-        jnp.all(jnp.isfinite(x))
+        sall(jnp.isfinite(x))
         for x in jax.tree_util.tree_leaves(tree)
         if jnp.issubdtype(jnp.result_type(x), jnp.inexact)
     ]
-    return jnp.all(jnp.stack(leaves)) if leaves else jnp.array(True)
+    return sall(jnp.stack(leaves)) if leaves else jnp.array(True)
 
 
 def intrinsics_ok(A):
     """A usable intrinsic matrix: finite, with non-zero focal lengths (invertible, eq. (15))."""
-    return jnp.all(jnp.isfinite(A)) & (A[0, 0] != 0.0) & (A[1, 1] != 0.0) & (A[2, 2] != 0.0)
+    return sall(jnp.isfinite(A)) & (A[0, 0] != 0.0) & (A[1, 1] != 0.0) & (A[2, 2] != 0.0)
 
 
 def result_names(result):

@@ -1,4 +1,5 @@
-"""Determinants and inverses of 2x2 and 3x3 matrices in closed form.
+"""Determinants, inverses and the symmetric eigendecomposition of 2x2 and 3x3 matrices in
+closed form.
 
 Under `vmap` on a CPU, `jnp.linalg.det`, `inv` and `solve` of a 3x3 matrix go through a
 batched LU factorisation (a LAPACK call per matrix); these are a few dozen fused flops.
@@ -7,6 +8,9 @@ For the well-conditioned matrices they serve (intrinsics, rotations, normalised
 homographies) they agree with the LU results to a few ulps.
 """
 
+import math
+
+import jax
 import jax.numpy as jnp
 
 
@@ -30,21 +34,175 @@ def adjugate3(B):
 
 def det3(B):
     """The determinant of a 3x3 matrix (the triple product of its columns)."""
-    return jnp.dot(B[:, 0], jnp.cross(B[:, 1], B[:, 2]))
+    return dot(B[:, 0], jnp.cross(B[:, 1], B[:, 2]))
 
 
 def inv3(B):
     """The inverse of a 3x3 matrix (its adjugate over its determinant)."""
     adj = adjugate3(B)
-    return adj / jnp.dot(adj[0], B[:, 0])
+    return adj / dot(adj[0], B[:, 0])
+
+
+_UNROLL = 64  # longer axes keep XLA's reduction
+
+
+def _reduce(x, axis, op, fallback):
+    if axis is None:
+        x, axis = x.reshape(-1), 0
+    if x.shape[axis] > _UNROLL:
+        return fallback(x, axis=axis)
+    parts = [jax.lax.index_in_dim(x, k, axis, keepdims=False) for k in range(x.shape[axis])]
+    out = parts[0]
+    for q in parts[1:]:
+        out = op(out, q)
+    return out
+
+
+def ssum(x, axis=None):
+    """`jnp.sum(x, axis)` over a small axis (or all of a small array), unrolled into adds.
+
+    Under `vmap` on a CPU a reduction over 3 or 4 entries is a kernel call of its own
+    (a pass over the batch) and a boundary of XLA's fusions; the adds fuse with their
+    neighbours into one loop. Axes longer than 64 are reduced by `jnp.sum`."""
+    return _reduce(x, axis, jnp.add, jnp.sum)
+
+
+def smax(x, axis=None):
+    """`jnp.max(x, axis)` over a small axis, unrolled as `ssum` (NaN propagates)."""
+    return _reduce(x, axis, jnp.maximum, jnp.max)
+
+
+def sall(x, axis=None):
+    """`jnp.all(x, axis)` over a small axis, unrolled as `ssum`."""
+    return _reduce(x, axis, jnp.logical_and, jnp.all)
+
+
+def dot(u, v):
+    """`u @ v` for two short vectors, unrolled."""
+    return ssum(u * v, -1)
 
 
 def mm(A, B):
-    """`A @ B` for small matrices as a broadcast multiply and a sum: under `vmap` XLA fuses
-    it with its neighbours, where a batched `dot` of 3x3 matrices is a slow GEMM call."""
-    return jnp.sum(A[..., :, :, None] * B[..., None, :, :], axis=-2)
+    """`A @ B` for small matrices, unrolled into broadcast multiplies and adds: under `vmap`
+    a batched `dot` of 3x3 matrices is a slow GEMM call and a fusion boundary."""
+    out = A[..., :, 0:1] * B[..., 0:1, :]
+    for k in range(1, A.shape[-1]):
+        out = out + A[..., :, k : k + 1] * B[..., k : k + 1, :]
+    return out
 
 
 def mv(A, x):
-    """`A @ x` for a small matrix and a vector, as `mm`."""
-    return jnp.sum(A * x[..., None, :], axis=-1)
+    """`A @ x` for a small matrix and a vector, unrolled as `mm`."""
+    out = A[..., :, 0] * x[..., 0:1]
+    for k in range(1, A.shape[-1]):
+        out = out + A[..., :, k] * x[..., k : k + 1]
+    return out
+
+
+def norm(x):
+    """The Euclidean norm of a short vector (or Frobenius of a small matrix), unrolled."""
+    return jnp.sqrt(ssum(x * x))
+
+
+def _unit(x):
+    return x / norm(x)
+
+
+def _eigh3_forward(A):
+    """Eigenvalues (ascending) and eigenvectors (columns) of a symmetric 3x3 matrix.
+
+    The eigenvalues are those of $q I + p C$ with $q = \\mathrm{tr}(A)/3$,
+    $p = \\|A - qI\\|_F / \\sqrt 6$ and $\\det C / 2 = \\cos 3\\varphi$: $q + 2p\\cos(\\varphi +
+    2\\pi k/3)$ (the trigonometric solution of the characteristic cubic). Only the one
+    farthest from the other two is taken from it (the largest when $\\cos 3\\varphi \\ge 0$,
+    else the smallest): its eigenvector is the longest cross product of two rows of
+    $A - \\lambda I$, well conditioned since its gap is at least half the spread. The other
+    two come from the 2x2 matrix $A$ makes on the plane orthogonal to it, by a rotation
+    $\\tan 2\\theta = 2 s_{12} / (s_{11} - s_{22})$; every eigenvalue is a Rayleigh quotient.
+    Errors are of the order of those of LAPACK's: eps times the norm for the eigenvalues,
+    eps over the gap for the eigenvectors.
+    """
+    dtype = A.dtype
+    eye = jnp.eye(3, dtype=dtype)
+    s = smax(jnp.abs(A))
+    s = jnp.where(s > 0.0, s, 1.0)
+    A = A / s
+    q = (A[0, 0] + A[1, 1] + A[2, 2]) / 3.0
+    B = A - q * eye
+    p = jnp.sqrt(ssum(B * B) / 6.0)
+    scalar = p <= 0.0  # A = qI: any basis
+    p_safe = jnp.where(scalar, 1.0, p)
+    r = jnp.clip(det3(B / p_safe) / 2.0, -1.0, 1.0)
+    phi = jnp.arccos(r) / 3.0
+    top = r >= 0.0  # the largest eigenvalue is the isolated one
+    lam = q + 2.0 * p * jnp.where(top, jnp.cos(phi), jnp.cos(phi + 2.0 * math.pi / 3.0))
+
+    rows = A - lam * eye
+    big = smax(jnp.abs(rows))
+    rows = rows / jnp.where(big > 0.0, big, 1.0)  # no underflow in the cross products
+    crosses = jnp.stack(
+        [
+            jnp.cross(rows[0], rows[1]),
+            jnp.cross(rows[0], rows[2]),
+            jnp.cross(rows[1], rows[2]),
+        ]
+    )
+    sizes = ssum(crosses * crosses, 1)
+    c = jnp.where(
+        sizes[0] >= jnp.maximum(sizes[1], sizes[2]),
+        crosses[0],
+        jnp.where(sizes[1] >= sizes[2], crosses[1], crosses[2]),
+    )
+    c = jnp.where(scalar | (smax(sizes) <= 0.0), eye[2], c)
+    v = _unit(c)
+
+    # An orthonormal basis (u, w) of the plane orthogonal to v.
+    u = jnp.where(
+        jnp.abs(v[0]) > jnp.abs(v[1]),
+        _unit(jnp.stack([-v[2], jnp.zeros((), dtype), v[0]])),
+        _unit(jnp.stack([jnp.zeros((), dtype), v[2], -v[1]])),
+    )
+    w = jnp.cross(v, u)
+    Au, Aw = mv(A, u), mv(A, w)
+    s11, s22, s12 = dot(u, Au), dot(w, Aw), dot(u, Aw)
+    two_theta = jnp.arctan2(s12, (s11 - s22) / 2.0)
+    cos_t, sin_t = jnp.cos(two_theta / 2.0), jnp.sin(two_theta / 2.0)
+    e_hi = cos_t * u + sin_t * w
+    e_lo = cos_t * w - sin_t * u
+    mu_hi, mu_lo = dot(e_hi, mv(A, e_hi)), dot(e_lo, mv(A, e_lo))
+    lam_v = dot(v, mv(A, v))
+
+    values = jnp.where(top, jnp.stack([mu_lo, mu_hi, lam_v]), jnp.stack([lam_v, mu_lo, mu_hi]))
+    vectors = jnp.where(top, jnp.stack([e_lo, e_hi, v], axis=1), jnp.stack([v, e_lo, e_hi], axis=1))
+    values = jnp.where(scalar, q, values)
+    vectors = jnp.where(scalar, eye, vectors)
+    return values * s, vectors
+
+
+@jax.custom_jvp
+def _eigh3(A):
+    return _eigh3_forward(A)
+
+
+@_eigh3.defjvp
+def _eigh3_jvp(primals, tangents):
+    # The first-order perturbation of a symmetric eigenproblem (the rule of
+    # `jnp.linalg.eigh`): d(lambda_i) = v_i^T dA v_i and
+    # dV = V (F o V^T dA V), F_ij = 1 / (lambda_j - lambda_i) off the diagonal.
+    (A,), (dA,) = primals, tangents
+    lam, V = _eigh3(A)
+    G = mm(V.T, mm(dA, V))
+    eye = jnp.eye(3, dtype=lam.dtype)
+    F = 1.0 / (eye + lam[None, :] - lam[:, None]) - eye
+    return (lam, V), (jnp.diagonal(G), mm(V, F * G))
+
+
+def eigh3(A):
+    """`jnp.linalg.eigh` of a symmetric 3x3 matrix in closed form.
+
+    Returns `(values, vectors)`: the eigenvalues in ascending order and the orthonormal
+    eigenvectors as columns, like `jnp.linalg.eigh` (which on a CPU is a LAPACK call per
+    matrix under `vmap`). `A` is symmetrised first. Derivatives follow the same rule as
+    `jnp.linalg.eigh`'s, finite where the eigenvalues are distinct.
+    """
+    return _eigh3((A + A.T) / 2.0)

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, raise_or_keep
-from .._small import inv3
+from .._small import inv3, mm, mv, sall
 from .._util import as_float, check_points, check_shape, positive_finite
 from ..geometry import (
     L_omega,
@@ -75,8 +75,13 @@ def error_signal(
 def _L_v(m1):
     """$L_v$ of eq. (23) from the normalized coordinates $[x_1/z_1, y_1/z_1]$."""
     dtype = m1.dtype
-    L = jnp.eye(3, dtype=dtype)
-    return L.at[0, 2].set(-m1[0]).at[1, 2].set(-m1[1])
+    return _unit_upper(-m1[0], -m1[1], dtype)
+
+
+def _unit_upper(a, b, dtype):
+    """[[1, 0, a], [0, 1, b], [0, 0, 1]] by a stack (a scatter per frame is slow)."""
+    o, z = jnp.ones((), dtype), jnp.zeros((), dtype)
+    return jnp.stack([jnp.stack([o, z, a]), jnp.stack([z, o, b]), jnp.stack([z, z, o])])
 
 
 def kinematics_jacobian(
@@ -109,16 +114,18 @@ def kinematics_jacobian(
     dtype = A.dtype
     Ae = extended_intrinsics(A)
     Lv = _L_v(m1)
-    B = (alpha1 / z1_star) * (Ae @ Lv)
-    Rs = R @ skew(s1) @ R.T
+    B = (alpha1 / z1_star) * mm(Ae, Lv)
+    Rs = mm(mm(R, skew(s1)), R.T)
     Lw = L_omega(e_omega)
     zero = jnp.zeros((3, 3), dtype)
-    J = jnp.block([[B, -B @ Rs], [zero, Lw]])
-    Lv_inv = jnp.eye(3, dtype=dtype).at[0, 2].set(m1[0]).at[1, 2].set(m1[1])
-    B_inv = (z1_star / alpha1) * (Lv_inv @ inv3(Ae))
+    J = jnp.block([[B, -mm(B, Rs)], [zero, Lw]])
+    Lv_inv = _unit_upper(m1[0], m1[1], dtype)
+    B_inv = (z1_star / alpha1) * mm(Lv_inv, inv3(Ae))
     Lw_inv = L_omega_inv(e_omega)
-    J_inv = jnp.block([[B_inv, Rs @ Lw_inv], [zero, Lw_inv]])
-    return J, J_inv
+    J_inv = jnp.block([[B_inv, mm(Rs, Lw_inv)], [zero, Lw_inv]])
+    # materialised once per frame: XLA's CPU fusions would otherwise recompute every entry
+    # into each consumer (the finiteness test, the NaN fill, the estimator)
+    return jax.lax.optimization_barrier((J, J_inv))
 
 
 def velocity_measurements(
@@ -159,16 +166,16 @@ def velocity_measurements(
     p_cur = as_float(p_cur)
     if visible is not None:
         # feature 1 out of view: its pixel from the homography of the others (eq. (17))
-        g = rec.G_n @ to_homogeneous(p_ref[0])
+        g = mv(rec.G_n, to_homogeneous(p_ref[0]))
         p1 = jnp.where(visible[0], p_cur[0], g[:2] / g[2])
         p_cur = p_cur.at[0].set(p1)
     # a failed frame is reported by its result (and NaN-filled below), never by so3_log
     R_bar = jnp.where(rec.result == RESULTS.successful, rec.R_bar, jnp.eye(3, dtype=A.dtype))
     e = error_signal(p_cur[0], p_ref[0], rec.alpha[0], R_bar)
     m1 = pixel_to_normalized(p_cur[0], A)
-    R = R_bar @ R_star  # eq. (8)
+    R = mm(R_bar, R_star)  # eq. (8)
     J, J_inv = kinematics_jacobian(A, m1, rec.alpha[0], z1_star, R, s1, e[3:])
-    ok = jnp.all(jnp.isfinite(J_inv)) & jnp.all(jnp.isfinite(J))
+    ok = sall(jnp.isfinite(J_inv)) & sall(jnp.isfinite(J))
     result = RESULTS.where(
         rec.result != RESULTS.successful,
         rec.result,

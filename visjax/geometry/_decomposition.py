@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._small import det2, det3, inv2, inv3
+from .._small import det2, det3, eigh3, inv2, inv3, mm, mv, norm, sall, smax
 from .._util import as_float, check_shape
 
 
@@ -60,16 +60,16 @@ def _decompose_core(H):
 def _decompose_unscaled(H):
     dtype = H.dtype
     eye = jnp.eye(3, dtype=dtype)
-    M = H.T @ H
+    M = mm(H.T, H)
     cube = jnp.cbrt(jnp.abs(det3(H)))
     cube = jnp.where(cube > 0.0, cube, 1.0)
-    dev = jnp.max(jnp.abs(jax.lax.stop_gradient(M / cube**2) - eye))
+    dev = smax(jnp.abs(jax.lax.stop_gradient(M / cube**2) - eye))
     # explicit finiteness: a max over a large vmap batch can drop a NaN
-    is_rotation = (dev < _rotation_tol(dtype)) & jnp.all(jnp.isfinite(M))
+    is_rotation = (dev < _rotation_tol(dtype)) & sall(jnp.isfinite(M))
 
     # Generic branch, fed a harmless matrix when H is a rotation (double-where).
     M_safe = jnp.where(is_rotation, jnp.diag(jnp.array([4.0, 1.0, 0.25], dtype)), M)
-    lam, V = jnp.linalg.eigh(M_safe)  # ascending: lam[2] = sigma_1^2 (unnormalised)
+    lam, V = eigh3(M_safe)  # ascending: lam[2] = sigma_1^2 (unnormalised)
     scale_generic = jnp.sqrt(lam[1])  # the middle singular value of H
     Hn = H / scale_generic
     s1sq = lam[2] / lam[1]
@@ -81,11 +81,11 @@ def _decompose_unscaled(H):
 
     def solution(u):
         U = jnp.stack([v2, u, jnp.cross(v2, u)], axis=1)
-        Hv2, Hu = Hn @ v2, Hn @ u
+        Hv2, Hu = mv(Hn, v2), mv(Hn, u)
         W = jnp.stack([Hv2, Hu, jnp.cross(Hv2, Hu)], axis=1)
-        R = W @ U.T
+        R = mm(W, U.T)
         n = jnp.cross(v2, u)
-        t = (Hn - R) @ n
+        t = mv(Hn - R, n)
         return R, t, n
 
     R1, t1, n1 = solution((a * v1 + b * v3) / c)
@@ -111,7 +111,7 @@ def _check_H_K(H, K):
         check_shape(K, (3, 3), "K")
         dtype = jnp.result_type(H, K)
         H, K = H.astype(dtype), K.astype(dtype)
-        H = inv3(K) @ (H @ K)  # K^{-1} H K: the Euclidean homography (eq. (16))
+        H = mm(inv3(K), mm(H, K))  # K^{-1} H K: the Euclidean homography (eq. (16))
     return H
 
 
@@ -147,10 +147,12 @@ def decompose_homography(
 
 def _plane_basis(n):
     """Unit vectors a, b with a x b = n, for unit n; locally smooth in n."""
-    k = jnp.argmin(jnp.abs(n))
-    e = jnp.zeros_like(n).at[k].set(1.0)
+    m = jnp.abs(n)
+    first = (m[0] <= m[1]) & (m[0] <= m[2])  # the axis of the smallest |n_k| (the first)
+    second = ~first & (m[1] <= m[2])
+    e = jnp.stack([first, second, ~first & ~second]).astype(n.dtype)
     a = jnp.cross(e, n)
-    a = a / jnp.linalg.norm(a)
+    a = a / norm(a)
     b = jnp.cross(n, a)
     return a, b
 
@@ -158,7 +160,7 @@ def _plane_basis(n):
 def _inv_sqrt_2x2(S):
     """$S^{-1/2}$ of a 2x2 symmetric positive definite matrix, in closed form."""
     rd = jnp.sqrt(det2(S))
-    root = (S + rd * jnp.eye(2, dtype=S.dtype)) / jnp.sqrt(jnp.trace(S) + 2.0 * rd)
+    root = (S + rd * jnp.eye(2, dtype=S.dtype)) / jnp.sqrt(S[0, 0] + S[1, 1] + 2.0 * rd)
     return inv2(root)
 
 
@@ -166,7 +168,7 @@ def _prescale(H):
     """`H / c` and `c`, c = max |H_ij|: the decompositions are invariant to the scale of
     `H`, and `det`, `H^T H` of a matrix scaled by 1e10 or 1e-10 overflow or underflow in
     float32. `c` is held constant for the derivative (exact, by that invariance)."""
-    c = jax.lax.stop_gradient(jnp.max(jnp.abs(H)))
+    c = jax.lax.stop_gradient(smax(jnp.abs(H)))
     c = jnp.where(c > 0.0, c, 1.0)
     return H / c, c
 
@@ -180,14 +182,18 @@ def _known_normal_core(H, n):
 
 def _known_normal_unscaled(H, n):
     a, b = _plane_basis(n)
-    Mab = H @ jnp.stack([a, b], axis=1)  # = [R a, R b] * scale for exact data
-    S = Mab.T @ Mab
+    Mab = mm(H, jnp.stack([a, b], axis=1))  # = [R a, R b] * scale for exact data
+    S = mm(Mab.T, Mab)
     scale = jnp.sqrt(jnp.sqrt(det2(S)))  # det(S)^(1/4); two square roots, not a pow
-    Q = (Mab / scale) @ _inv_sqrt_2x2(S / scale**2)  # nearest orthonormal pair
+    Q = mm(Mab / scale, _inv_sqrt_2x2(S / scale**2))  # nearest orthonormal pair
     qa, qb = Q[:, 0], Q[:, 1]
-    R = jnp.outer(qa, a) + jnp.outer(qb, b) + jnp.outer(jnp.cross(qa, qb), n)
-    x_h = (H / scale - R) @ n  # H n = R n + x_h (n . n), eq. (12)
-    return R, x_h, scale
+    R = (
+        qa[:, None] * a[None, :]
+        + qb[:, None] * b[None, :]
+        + jnp.cross(qa, qb)[:, None] * n[None, :]
+    )
+    x_h = mv(H / scale - R, n)  # H n = R n + x_h (n . n), eq. (12)
+    return jax.lax.optimization_barrier((R, x_h, scale))  # once per frame, as in `_dlt`
 
 
 def decompose_homography_known_normal(

@@ -15,7 +15,7 @@ import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, intrinsics_ok, raise_or_keep
-from .._small import adjugate3, det3, inv3, mm, mv
+from .._small import adjugate3, det3, inv3, mm, mv, norm, sall, smax, ssum
 from .._util import as_float, check_points, check_shape
 from ._camera import to_homogeneous
 
@@ -33,14 +33,14 @@ def _normalising_transform(p, w=None):
     """Hartley's similarity: centroid to the origin, RMS distance to sqrt(2); with weights
     `w` (0 or 1 per point), over the points of weight 1 only."""
     if w is None:
-        c = jnp.mean(p, axis=0)
+        c = ssum(p, 0) / p.shape[0]
         d = p - c[None, :]
-        ms = jnp.mean(jnp.sum(d**2, axis=1))
+        ms = ssum(d**2) / p.shape[0]
     else:
-        total = jnp.maximum(jnp.sum(w), 1.0)
-        c = jnp.sum(w[:, None] * p, axis=0) / total
+        total = jnp.maximum(ssum(w), 1.0)
+        c = ssum(w[:, None] * p, 0) / total
         d = (p - c[None, :]) * w[:, None]
-        ms = jnp.sum(d**2) / total
+        ms = ssum(d**2) / total
     ms_safe = jnp.where(ms > 0.0, ms, 1.0)
     s = jnp.sqrt(2.0 / ms_safe)
     return c, s, d * s
@@ -118,7 +118,7 @@ def _dlt(p_ref, p_cur, visible=None):
     if visible is not None:
         w = visible.astype(dtype)
         p_cur = jnp.where(visible[:, None], p_cur, 0.0)
-    nonfinite = ~(jnp.all(jnp.isfinite(p_ref)) & jnp.all(jnp.isfinite(p_cur)))
+    nonfinite = ~(sall(jnp.isfinite(p_ref)) & sall(jnp.isfinite(p_cur)))
     p_ref = jnp.where(nonfinite, jnp.zeros_like(p_ref), p_ref)
     p_cur = jnp.where(nonfinite, jnp.zeros_like(p_cur), p_cur)
 
@@ -127,7 +127,7 @@ def _dlt(p_ref, p_cur, visible=None):
     tol = _rcond_tol(dtype)
     if n == 4 and visible is not None:
         # four points, one of them out of view: no homography
-        n_visible_ok = jnp.all(visible)
+        n_visible_ok = sall(visible)
     else:
         n_visible_ok = jnp.array(True)
     if n == 4:
@@ -146,7 +146,7 @@ def _dlt(p_ref, p_cur, visible=None):
         q_ref_safe = jnp.where(swap, _SQUARE.astype(dtype), q_ref)
         q_cur_safe = jnp.where(swap, _SQUARE.astype(dtype), q_cur)
         G_hat = mm(_projective_basis(q_cur_safe), adjugate3(_projective_basis(q_ref_safe)))
-        G_hat = G_hat / jnp.sqrt(jnp.sum(G_hat**2))  # its scale is arbitrary: unit norm
+        G_hat = G_hat / norm(G_hat)  # its scale is arbitrary: unit norm
     else:
         M, b = _design(q_ref, q_cur)
         if w is not None:
@@ -166,7 +166,7 @@ def _dlt(p_ref, p_cur, visible=None):
     # Points collinear in one image only can still give a solvable system, but its
     # solution is a singular G: no homography maps them.
     G_hat_ng = jax.lax.stop_gradient(G_hat)
-    norm2 = jnp.sum(G_hat_ng**2)
+    norm2 = ssum(G_hat_ng**2)
     degenerate = degenerate | ~(jnp.abs(det3(G_hat_ng)) > tol * norm2 * jnp.sqrt(norm2))
 
     # Undo the normalisations: G = T_cur^{-1} G_hat T_ref.
@@ -179,7 +179,7 @@ def _dlt(p_ref, p_cur, visible=None):
     # third row at the data's own scale (w_i = g31 u_i + g32 v_i + g33), not with |G|, whose
     # translation entries grow with the pixel coordinates (version 1 called a pure
     # translation of pixels near 4e5 "g33 = 0" in float32).
-    extent = jnp.max(jnp.abs(p_ref), axis=0)
+    extent = smax(jnp.abs(p_ref), 0)
     row = jnp.abs(G[2, 0]) * extent[0] + jnp.abs(G[2, 1]) * extent[1] + jnp.abs(g33)
     g33_zero = ~(jnp.abs(g33) > 100.0 * jnp.finfo(dtype).eps * row)
     g33_safe = jnp.where(g33_zero, 1.0, g33)
@@ -194,7 +194,9 @@ def _dlt(p_ref, p_cur, visible=None):
             RESULTS.where(g33_zero, RESULTS.g33_zero, RESULTS.successful),
         ),
     )
-    return G_n, result
+    # materialised once per frame: XLA's CPU fusions would otherwise recompute the whole
+    # fit into every entry of every consumer
+    return jax.lax.optimization_barrier(G_n), result
 
 
 def _check_pair(p_ref, p_cur):
@@ -266,7 +268,7 @@ def alpha_g33(G_n: Float[ArrayLike, "3 3"], p_ref: Float[ArrayLike, "n 2"]) -> F
     G_n = as_float(G_n)
     check_shape(G_n, (3, 3), "G_n")
     p_ref = check_points(p_ref, "p_ref", min_points=1)
-    w = to_homogeneous(p_ref) @ G_n[2]
+    w = mv(to_homogeneous(p_ref), G_n[2])
     return 1.0 / w
 
 
@@ -288,7 +290,7 @@ def euclidean_homography(
     check_shape(A, (3, 3), "A")
     ok = intrinsics_ok(A)
     A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))  # no inf, no NaN gradient
-    return jnp.where(ok, inv3(A) @ (G @ A), jnp.nan)
+    return jnp.where(ok, mm(inv3(A), mm(G, A)), jnp.nan)
 
 
 def projective_homography(
@@ -305,4 +307,4 @@ def projective_homography(
     check_shape(A, (3, 3), "A")
     ok = intrinsics_ok(A)
     A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))
-    return jnp.where(ok, A @ H @ inv3(A), jnp.nan)
+    return jnp.where(ok, mm(mm(A, H), inv3(A)), jnp.nan)

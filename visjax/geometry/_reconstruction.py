@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, all_finite, intrinsics_ok, raise_or_keep
+from .._small import mv, norm, sall
 from .._util import as_float, check_shape
 from ._camera import pixel_to_normalized, to_homogeneous
 from ._decomposition import _decompose_core, _known_normal_core, select_solution
@@ -103,7 +104,7 @@ def euclidean_reconstruction(
     n_prior = as_float(n_prior)
     check_shape(n_prior, (3,), "n_prior")
     n_prior = n_prior.astype(dtype)
-    n_prior = n_prior / jnp.linalg.norm(n_prior)
+    n_prior = n_prior / norm(n_prior)
 
     if visible is not None:
         visible = jnp.asarray(visible)
@@ -115,12 +116,12 @@ def euclidean_reconstruction(
     G_n, result = _dlt(p_ref, p_cur, visible)
 
     # alpha_i g33 of eq. (17): all of one sign, the sign of g33, since alpha_i > 0.
-    w = to_homogeneous(p_ref) @ G_n[2]
-    at_infinity = ~jnp.all(jnp.abs(w) > 0.0)
+    w = mv(to_homogeneous(p_ref), G_n[2])
+    at_infinity = ~sall(jnp.abs(w) > 0.0)
     w = jnp.where(jnp.abs(w) > 0.0, w, 1.0)
     beta = 1.0 / w
     sign = jnp.where(beta[0] < 0.0, -1.0, 1.0).astype(dtype)
-    behind = at_infinity | ~jnp.all(sign * beta > 0.0)
+    behind = at_infinity | ~sall(sign * beta > 0.0)
 
     H_over_g33 = euclidean_homography(G_n, A)
     Hs = sign * H_over_g33  # a positive multiple of H
@@ -129,9 +130,9 @@ def euclidean_reconstruction(
     if n_star is not None:
         n_star = as_float(n_star)
         check_shape(n_star, (3,), "n_star")
-        n = n_star.astype(dtype) / jnp.linalg.norm(n_star.astype(dtype))
+        n = n_star.astype(dtype) / norm(n_star.astype(dtype))
         R, x_h, scale = _known_normal_core(Hs, n)
-        physical = jnp.all(m_ref @ n > 0.0)
+        physical = sall(mv(m_ref, n) > 0.0)
     else:
         Rs, ts, ns, scale, is_rotation = _decompose_core(Hs)
         R, x_h, n, physical = select_solution(Rs, ts, ns, m_ref, n_prior)

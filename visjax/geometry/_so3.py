@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._small import det3, dot, mm, sall, smax, ssum
 from .._util import as_float, check_shape
 
 
@@ -104,9 +105,9 @@ def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     omega = as_float(omega)
     check_shape(omega, (3,), "omega")
-    a, b, _ = _rotation_coefficients(jnp.sum(omega**2))
+    a, b, _ = _rotation_coefficients(ssum(omega**2))
     W = skew(omega)
-    return jnp.eye(3, dtype=omega.dtype) + a * W + b * (W @ W)
+    return jnp.eye(3, dtype=omega.dtype) + a * W + b * mm(W, W)
 
 
 def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
@@ -134,8 +135,8 @@ def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     check_shape(R, (3, 3), "R")
     dtype = R.dtype
     w = vee(R)  # = sin(theta) u
-    c = jnp.clip(0.5 * (jnp.trace(R) - 1.0), -1.0, 1.0)  # = cos(theta)
-    s2 = jnp.sum(w**2)  # = sin^2(theta)
+    c = jnp.clip(0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0), -1.0, 1.0)  # = cos(theta)
+    s2 = ssum(w**2)  # = sin^2(theta)
 
     # Branch 1 (cos >= 0, theta <= pi/2): theta u = w * theta / sin(theta), where
     # theta / sin(theta) = asin(s)/s = 1 + s^2/6 + 3 s^4/40 + ... for small s = sin(theta).
@@ -161,8 +162,8 @@ def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     col = jnp.where(first, B[:, 0], jnp.where(second, B[:, 1], B[:, 2]))
     b_kk = jnp.where(first, d[0], jnp.where(second, d[1], d[2]))
     u = col / jnp.sqrt(b_kk * (1.0 - c_safe))
-    u = jnp.where(jnp.dot(u, w_safe) >= 0.0, u, -u)
-    sw2 = jnp.sum(w_safe**2)
+    u = jnp.where(dot(u, w_safe) >= 0.0, u, -u)
+    sw2 = ssum(w_safe**2)
     sw = jnp.where(sw2 > 0.0, jnp.sqrt(jnp.where(sw2 > 0.0, sw2, 1.0)), 0.0)
     theta_large = jnp.arctan2(sw, c_safe)
     large_branch = theta_large * u
@@ -170,15 +171,16 @@ def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     out = jnp.where(use_large, large_branch, small_branch)
     # a non-finite entry never becomes a finite vector (the clip and argmax above would
     # hide it): NaN in, NaN out
-    out = jnp.where(jnp.all(jnp.isfinite(R)), out, jnp.nan)
+    finite = sall(jnp.isfinite(R))
+    out = jax.lax.optimization_barrier(jnp.where(finite, out, jnp.nan))  # once per frame
     # not a rotation: R^T R = I and det R = 1 within a dtype-aware tolerance, 10 sqrt(eps)
     # (1.5e-7 in float64, 3.5e-3 in float32; the reconstruction's rotations meet it to
     # ~1e-15 and ~1e-6)
     tol = 10.0 * float(jnp.finfo(dtype).eps) ** 0.5
-    off = jnp.max(jnp.abs(R.T @ R - jnp.eye(3, dtype=dtype))) + jnp.abs(jnp.linalg.det(R) - 1.0)
+    off = smax(jnp.abs(mm(R.T, R) - jnp.eye(3, dtype=dtype))) + jnp.abs(det3(R) - 1.0)
     return eqx.error_if(
         out,
-        jax.lax.stop_gradient(jnp.all(jnp.isfinite(R)) & (off > tol)),
+        jax.lax.stop_gradient(finite & (off > tol)),
         "so3_log: the matrix is not a rotation (R^T R != I or det R != 1).",
     )
 
@@ -219,8 +221,8 @@ def L_omega(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
     W = skew(e_omega)
-    c = _L_omega_coefficient(jnp.sum(e_omega**2))
-    return jnp.eye(3, dtype=e_omega.dtype) - 0.5 * W + c * (W @ W)
+    c = _L_omega_coefficient(ssum(e_omega**2))
+    return jnp.eye(3, dtype=e_omega.dtype) - 0.5 * W + c * mm(W, W)
 
 
 def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
@@ -233,6 +235,6 @@ def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
-    _, b, c = _rotation_coefficients(jnp.sum(e_omega**2))
+    _, b, c = _rotation_coefficients(ssum(e_omega**2))
     W = skew(e_omega)
-    return jnp.eye(3, dtype=e_omega.dtype) + b * W + c * (W @ W)
+    return jnp.eye(3, dtype=e_omega.dtype) + b * W + c * mm(W, W)
