@@ -18,6 +18,11 @@ References timed in the same run, on the same trajectories:
   costs, without the per-trajectory reconstruction).
 - `noise_only`: drawing the noise for the batch.
 
+The study is timed twice: with JAX's default random-number generator (threefry, counter
+based, the same noise on every backend) and with `impl="rbg"` keys (XLA's own generator,
+cheaper on a CPU; the noise differs, its distribution does not). A study's noise
+generator is the user's choice: `jax.random.key(seed, impl="rbg")`.
+
     python benchmarks/monte_carlo.py [--batch 1024] [--duration 1.0] [--chunk 64]
 """
 
@@ -93,6 +98,10 @@ def main():
     study_first, study_s = timed(study, keys, repeats=args.repeats)
     rms, codes = study(keys)
     failed = int(np.sum(np.asarray(codes) != 0))
+    keys_rbg = jax.random.split(jax.random.key(0, impl="rbg"), args.batch)
+    _, study_rbg_s = timed(study, keys_rbg, repeats=args.repeats)
+    rms_rbg, codes_rbg = study(keys_rbg)
+    failed += int(np.sum(np.asarray(codes_rbg) != 0))
 
     # the same through the library's study factory (studies.velocity_tuning), for reference
     factory = jax.jit(jax.vmap(lambda k: setup.factory(params, k).summary.rms))
@@ -102,6 +111,7 @@ def main():
         jax.vmap(lambda k: 0.1 * jax.random.normal(k, sc.pixels.shape, dtype=sc.pixels.dtype))
     )
     _, noise_s = timed(noise, keys, repeats=args.repeats)
+    _, noise_rbg_s = timed(noise, keys_rbg, repeats=args.repeats)
 
     prepared = stream0.measured()
     prepared = type(prepared)(ts=prepared.ts, ys=prepared.ys, truth=sc.velocity)
@@ -140,8 +150,11 @@ def main():
                 "study_s": study_s,
                 "study_compile_s": study_first - study_s,
                 "ns_per_trajectory_step": ns,
+                "ns_per_trajectory_step_rbg": study_rbg_s * per,
+                "median_rms_worst_rbg": float(np.median(np.max(np.asarray(rms_rbg), axis=-1))),
                 "factory_ns_per_trajectory_step": factory_s * per,
                 "noise_only_ns_per_trajectory_step": noise_s * per,
+                "noise_only_rbg_ns_per_trajectory_step": noise_rbg_s * per,
                 "loop_only_ns_per_trajectory_step": loop_s * per,
                 "numpy_loop_ns_per_step": 1e9 * numpy_s / steps,
                 "speedup_vs_numpy_loop": 1e9 * numpy_s / steps / ns,

@@ -102,6 +102,19 @@ def table(results: dict) -> str:
                 _met(ns <= 300 and m["batch"] >= 1024),
             )
         )
+    if "ns_per_trajectory_step_rbg" in m:
+        ns = m["ns_per_trajectory_step_rbg"]
+        rows.append(
+            (
+                'the same study with `jax.random.key(seed, impl="rbg")` keys (XLA\'s generator)',
+                f"{_fmt(ns)} ns per trajectory-step",
+                f"drawing the noise alone: threefry {_fmt(m['noise_only_ns_per_trajectory_step'])}"
+                f" ns, rbg {_fmt(m['noise_only_rbg_ns_per_trajectory_step'])} ns",
+                f"{_fmt(m['numpy_loop_ns_per_step'] / ns)}x the NumPy loop",
+                "<= 300 ns at batch 1,024",
+                _met(ns <= 300 and m["batch"] >= 1024),
+            )
+        )
     o = r.get("one_trajectory", {})
     if "speedup_one_vs_numpy" in o:
         rows.append(

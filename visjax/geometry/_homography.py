@@ -15,7 +15,7 @@ import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, intrinsics_ok, raise_or_keep
-from .._small import adjugate3, det3, inv3, mm, mv, norm, sall, smax, ssum
+from .._small import det3, inv3, mm, mv, sall, smax, ssum
 from .._util import as_float, check_points, check_shape
 from ._camera import to_homogeneous
 
@@ -46,48 +46,94 @@ def _normalising_transform(p, w=None):
     return c, s, d * s
 
 
-def _similarity(s, c):
-    """$T$ with $T [u, v, 1]^T = [s (u - c_u), s (v - c_v), 1]^T$."""
-    z = jnp.zeros_like(s)
-    o = jnp.ones_like(s)
-    return jnp.stack(
-        [jnp.stack([s, z, -s * c[0]]), jnp.stack([z, s, -s * c[1]]), jnp.stack([z, z, o])]
-    )
+# The four-point path works on scalars (lists of per-frame numbers), not on small arrays:
+# under `vmap` every operation is then one elementwise operation over the batch, which
+# XLA's CPU compiler fuses into a few loops; the same formulas on (4, 2) and (3, 3) arrays
+# compile to ~40 small fusions of slices and concatenations, each a pass over the batch.
 
 
-def _similarity_inv(s, c):
-    """The inverse of `_similarity(s, c)`."""
-    z = jnp.zeros_like(s)
-    o = jnp.ones_like(s)
-    return jnp.stack(
-        [jnp.stack([1.0 / s, z, c[0]]), jnp.stack([z, 1.0 / s, c[1]]), jnp.stack([z, z, o])]
-    )
+def _total(xs):
+    out = xs[0]
+    for x in xs[1:]:
+        out = out + x
+    return out
 
 
-def _min_triangle_area(q):
-    """The smallest of the four triangle areas of four 2D points (no gather: slices)."""
-
-    def area(a, b, c):
-        ab, ac = b - a, c - a
-        return jnp.abs(ab[0] * ac[1] - ab[1] * ac[0])
-
-    p0, p1, p2, p3 = q[0], q[1], q[2], q[3]
-    areas = (area(p0, p1, p2), area(p0, p1, p3), area(p0, p2, p3), area(p1, p2, p3))
-    return 0.5 * jnp.minimum(jnp.minimum(areas[0], areas[1]), jnp.minimum(areas[2], areas[3]))
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-_SQUARE = jnp.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-def _projective_basis(q):
-    """$B$ (3, 3) with $B e_i \\sim p_i$ ($i = 1, 2, 3$) and $B (e_1 + e_2 + e_3) \\sim p_4$ for
-    four points `q` (4, 2), no three collinear: the columns $p_1, p_2, p_3$ (homogeneous)
-    scaled by $\\lambda = \\mathrm{adj}([p_1 p_2 p_3])\\, p_4 \\propto [p_1 p_2 p_3]^{-1} p_4$.
-    The homography of four correspondences is then $B_{cur} B_{ref}^{-1}
-    \\propto B_{cur}\\, \\mathrm{adj}(B_{ref})$, the same as the exact DLT of eq. (17)."""
-    P = jnp.concatenate([q, jnp.ones((4, 1), q.dtype)], axis=1)
-    B = P[:3].T
-    return B * mv(adjugate3(B), P[3])[None, :]
+def _normalising_scalars(u, v, w=None):
+    """`_normalising_transform` on scalars: `(c_u, c_v, s, x, y)` with x, y the lists of
+    normalised coordinates."""
+    if w is None:
+        total = float(len(u))
+        cu, cv = _total(u) / total, _total(v) / total
+        du = [a - cu for a in u]
+        dv = [b - cv for b in v]
+    else:
+        total = jnp.maximum(_total(w), 1.0)
+        cu = _total([wi * a for wi, a in zip(w, u)]) / total
+        cv = _total([wi * b for wi, b in zip(w, v)]) / total
+        du = [(a - cu) * wi for a, wi in zip(u, w)]
+        dv = [(b - cv) * wi for b, wi in zip(v, w)]
+    ms = _total([a * a + b * b for a, b in zip(du, dv)]) / total
+    s = jnp.sqrt(2.0 / jnp.where(ms > 0.0, ms, 1.0))
+    return cu, cv, s, [a * s for a in du], [b * s for b in dv]
+
+
+def _min_triangle_area(x, y):
+    """The smallest of the four triangle areas of four 2D points."""
+
+    def area(i, j, k):
+        return jnp.abs((x[j] - x[i]) * (y[k] - y[i]) - (y[j] - y[i]) * (x[k] - x[i]))
+
+    a = (area(0, 1, 2), area(0, 1, 3), area(0, 2, 3), area(1, 2, 3))
+    return 0.5 * jnp.minimum(jnp.minimum(a[0], a[1]), jnp.minimum(a[2], a[3]))
+
+
+_SQUARE = ((-1.0, 1.0, 1.0, -1.0), (-1.0, -1.0, 1.0, 1.0))  # x and y of a unit square
+
+
+def _projective_basis(x, y):
+    """$B$ (rows of scalars) with $B e_i \\sim p_i$ ($i = 1, 2, 3$) and $B (e_1 + e_2 + e_3)
+    \\sim p_4$ for four points, no three collinear: the columns $p_1, p_2, p_3$
+    (homogeneous) scaled by $\\lambda = \\mathrm{adj}([p_1 p_2 p_3])\\, p_4 \\propto
+    [p_1 p_2 p_3]^{-1} p_4$. The homography of four correspondences is then
+    $B_{cur} B_{ref}^{-1} \\propto B_{cur}\\, \\mathrm{adj}(B_{ref})$, the same as the exact
+    DLT of eq. (17)."""
+    c = [(x[i], y[i], 1.0) for i in range(3)]
+    p4 = (x[3], y[3], 1.0)
+    lam = (_dot(_cross(c[1], c[2]), p4), _dot(_cross(c[2], c[0]), p4), _dot(_cross(c[0], c[1]), p4))
+    return [[lam[j] * c[j][i] for j in range(3)] for i in range(3)]
+
+
+def _adjugate(B):
+    """The adjugate of a 3x3 matrix given by rows: its rows are the cross products of the
+    columns."""
+    c = [[B[i][j] for i in range(3)] for j in range(3)]
+    return [list(_cross(c[1], c[2])), list(_cross(c[2], c[0])), list(_cross(c[0], c[1]))]
+
+
+def _matmul(A, B):
+    return [[_dot(A[i], (B[0][j], B[1][j], B[2][j])) for j in range(3)] for i in range(3)]
+
+
+def _undo_normalisation(G, ref, cur):
+    """$G = T_{cur}^{-1} \\hat G T_{ref}$ for rows of scalars, $T [u, v, 1]^T = [s (u - c_u),
+    s (v - c_v), 1]^T$, written out: `ref` and `cur` are `(c_u, c_v, s)`."""
+    cu, cv, s = ref
+    X = [[g[0] * s, g[1] * s, g[2] - s * (cu * g[0] + cv * g[1])] for g in G]
+    cu, cv, s = cur
+    return [
+        [X[0][j] / s + cu * X[2][j] for j in range(3)],
+        [X[1][j] / s + cv * X[2][j] for j in range(3)],
+        X[2],
+    ]
 
 
 def _design(q_ref, q_cur):
@@ -107,6 +153,43 @@ def _design(q_ref, q_cur):
     return M, b
 
 
+def _four_point(p_ref, p_cur, w, ref_bad, cur_bad, tol):
+    """The exactly determined fit of four correspondences, on scalars: `(G, degenerate)`
+    with G the rows of $T_{cur}^{-1} \\hat G T_{ref}$."""
+    ws = None if w is None else [w[i] for i in range(4)]
+    ref = _normalising_scalars([p_ref[i, 0] for i in range(4)], [p_ref[i, 1] for i in range(4)], ws)
+    cur = _normalising_scalars([p_cur[i, 0] for i in range(4)], [p_cur[i, 1] for i in range(4)], ws)
+    # A homography exists and is unique iff no three of the four points are collinear (or
+    # coincident) in either image. Check the four triangle areas in the normalized
+    # coordinates (RMS radius sqrt(2), so a good quad has areas of order 1); cheaper and
+    # sharper than a condition number. Degenerate inputs are swapped for a square first, so
+    # that neither the value nor the gradient is NaN (the result code says "bad"); each side
+    # on its own, so that a reference shared by a batch stays unbatched. The barrier: the
+    # predicate once per frame (XLA would recompute the areas into every entry it selects).
+    ref_swap = (_min_triangle_area(ref[3], ref[4]) < tol) | ref_bad
+    cur_swap = jax.lax.optimization_barrier((_min_triangle_area(cur[3], cur[4]) < tol) | cur_bad)
+
+    def safe(x, y, swap):
+        return (
+            [jnp.where(swap, a, b) for a, b in zip(_SQUARE[0], x)],
+            [jnp.where(swap, a, b) for a, b in zip(_SQUARE[1], y)],
+        )
+
+    # the projective-basis construction in closed form (two 3x3 adjugates) instead of
+    # solving the 8x8 system
+    B_cur = _projective_basis(*safe(cur[3], cur[4], cur_swap))
+    B_ref = _projective_basis(*safe(ref[3], ref[4], ref_swap))
+    G_hat = _matmul(B_cur, _adjugate(B_ref))
+    size = jnp.sqrt(_total([g * g for row in G_hat for g in row]))
+    G_hat = [[g / size for g in row] for row in G_hat]  # its scale is arbitrary: unit norm
+    # points collinear in one image only: a singular G (a predicate: no gradient)
+    Gs = [[jax.lax.stop_gradient(g) for g in row] for row in G_hat]
+    norm2 = _total([g * g for row in Gs for g in row])
+    singular = ~(jnp.abs(_dot(Gs[0], _cross(Gs[1], Gs[2]))) > tol * norm2 * jnp.sqrt(norm2))
+    degenerate = ref_swap | cur_swap | singular
+    return _undo_normalisation(G_hat, ref[:3], cur[:3]), degenerate
+
+
 def _dlt(p_ref, p_cur, visible=None):
     """Normalized DLT. Returns `(G_n, result)`; `G_n` is finite whatever the input.
 
@@ -118,36 +201,23 @@ def _dlt(p_ref, p_cur, visible=None):
     if visible is not None:
         w = visible.astype(dtype)
         p_cur = jnp.where(visible[:, None], p_cur, 0.0)
-    nonfinite = ~(sall(jnp.isfinite(p_ref)) & sall(jnp.isfinite(p_cur)))
-    p_ref = jnp.where(nonfinite, jnp.zeros_like(p_ref), p_ref)
-    p_cur = jnp.where(nonfinite, jnp.zeros_like(p_cur), p_cur)
-
-    c_ref, s_ref, q_ref = _normalising_transform(p_ref, w)
-    c_cur, s_cur, q_cur = _normalising_transform(p_cur, w)
+    # each side made finite on its own, so that a reference shared by a batch of current
+    # frames is normalised once, not per frame; materialised (a barrier) once per frame
+    ref_bad = ~sall(jnp.isfinite(p_ref))
+    cur_bad = ~sall(jnp.isfinite(p_cur))
+    p_ref = jnp.where(ref_bad, jnp.zeros_like(p_ref), p_ref)
+    p_cur, cur_bad = jax.lax.optimization_barrier(
+        (jnp.where(cur_bad, jnp.zeros_like(p_cur), p_cur), cur_bad)
+    )
+    nonfinite = ref_bad | cur_bad
     tol = _rcond_tol(dtype)
-    if n == 4 and visible is not None:
-        # four points, one of them out of view: no homography
-        n_visible_ok = sall(visible)
-    else:
-        n_visible_ok = jnp.array(True)
     if n == 4:
-        # Exactly determined: a homography exists and is unique iff no three of the four
-        # points are collinear (or coincident) in either image. Check the four triangle
-        # areas in the normalized coordinates (RMS radius sqrt(2), so a good quad has areas
-        # of order 1); cheaper and sharper than a condition number.
-        degenerate = _min_triangle_area(q_ref) < tol
-        degenerate = degenerate | (_min_triangle_area(q_cur) < tol)
-        # the projective-basis construction in closed form (two 3x3 adjugates) instead of
-        # solving the 8x8 system; degenerate inputs are swapped for a square first, so
-        # that neither the value nor the gradient is NaN (the result code says "bad")
-        # computed once per frame: without the barrier XLA fuses the areas into every
-        # entry of the swapped points below and recomputes them 24 times
-        swap = jax.lax.optimization_barrier(degenerate | nonfinite)
-        q_ref_safe = jnp.where(swap, _SQUARE.astype(dtype), q_ref)
-        q_cur_safe = jnp.where(swap, _SQUARE.astype(dtype), q_cur)
-        G_hat = mm(_projective_basis(q_cur_safe), adjugate3(_projective_basis(q_ref_safe)))
-        G_hat = G_hat / norm(G_hat)  # its scale is arbitrary: unit norm
+        G, degenerate = _four_point(p_ref, p_cur, w, ref_bad, cur_bad, tol)
+        # four points, one of them out of view: no homography
+        n_visible_ok = jnp.array(True) if visible is None else sall(visible)
     else:
+        c_ref, s_ref, q_ref = _normalising_transform(p_ref, w)
+        c_cur, s_cur, q_cur = _normalising_transform(p_cur, w)
         M, b = _design(q_ref, q_cur)
         if w is not None:
             ww = jnp.concatenate([w, w])
@@ -163,27 +233,32 @@ def _dlt(p_ref, p_cur, visible=None):
         Q, Rq = jnp.linalg.qr(M_safe)
         h = jsl.solve_triangular(Rq, Q.T @ b, lower=False)
         G_hat = jnp.concatenate([h, jnp.ones((1,), dtype)]).reshape(3, 3)
-    # Points collinear in one image only can still give a solvable system, but its
-    # solution is a singular G: no homography maps them.
-    G_hat_ng = jax.lax.stop_gradient(G_hat)
-    norm2 = ssum(G_hat_ng**2)
-    degenerate = degenerate | ~(jnp.abs(det3(G_hat_ng)) > tol * norm2 * jnp.sqrt(norm2))
-
-    # Undo the normalisations: G = T_cur^{-1} G_hat T_ref.
-    G = mm(mm(_similarity_inv(s_cur, c_cur), G_hat), _similarity(s_ref, c_ref))
+        # Points collinear in one image only can still give a solvable system, but its
+        # solution is a singular G: no homography maps them.
+        G_hat_ng = jax.lax.stop_gradient(G_hat)
+        norm2 = ssum(G_hat_ng**2)
+        degenerate = degenerate | ~(jnp.abs(det3(G_hat_ng)) > tol * norm2 * jnp.sqrt(norm2))
+        n_visible_ok = jnp.array(True)
+        G = _undo_normalisation(
+            [[G_hat[i, j] for j in range(3)] for i in range(3)],
+            (c_ref[0], c_ref[1], s_ref),
+            (c_cur[0], c_cur[1], s_cur),
+        )
 
     bad = jax.lax.optimization_barrier(degenerate | nonfinite | ~n_visible_ok)  # once per frame
-    G = jnp.where(bad, jnp.eye(3, dtype=dtype), G)
-    g33 = G[2, 2]
+    G = [[jnp.where(bad, float(i == j), G[i][j]) for j in range(3)] for i in range(3)]
+    g33 = G[2][2]
     # g33 = 0: the image origin maps to infinity. Compared with the other terms of the
     # third row at the data's own scale (w_i = g31 u_i + g32 v_i + g33), not with |G|, whose
     # translation entries grow with the pixel coordinates (version 1 called a pure
     # translation of pixels near 4e5 "g33 = 0" in float32).
     extent = smax(jnp.abs(p_ref), 0)
-    row = jnp.abs(G[2, 0]) * extent[0] + jnp.abs(G[2, 1]) * extent[1] + jnp.abs(g33)
+    row = jnp.abs(G[2][0]) * extent[0] + jnp.abs(G[2][1]) * extent[1] + jnp.abs(g33)
     g33_zero = ~(jnp.abs(g33) > 100.0 * jnp.finfo(dtype).eps * row)
     g33_safe = jnp.where(g33_zero, 1.0, g33)
-    G_n = (G / g33_safe).at[2, 2].set(1.0)  # exactly 1, not 1 - ulp
+    G_n = [[G[i][j] / g33_safe for j in range(3)] for i in range(3)]
+    G_n[2][2] = jnp.ones_like(g33)  # exactly 1, not 1 - ulp
+    G_n = jnp.stack([jnp.stack(r) for r in G_n])
 
     result = RESULTS.where(
         nonfinite,
