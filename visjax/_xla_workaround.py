@@ -24,6 +24,7 @@ if not os.environ.get("VISJAX_KEEP_XLA_FLAGS"):
         os.environ["XLA_FLAGS"] = f"{_flags} {OPTION}".strip()
 
 # Not set: `--xla_cpu_experimental_ynn_fusion_type=` (XLA's own loop fusions instead of
-# YNNPACK's) makes the vmapped per-frame work 1.3-1.6x faster on jaxlib 0.10, but with it a
-# test worker crashed in XLA's CPU compiler in two full runs of the suite (once in two runs
-# without it; the cause is unknown); users may set it in `XLA_FLAGS` themselves.
+# YNNPACK's) made the vmapped per-frame work 1.3-1.6x faster on jaxlib 0.10 before that work
+# was unrolled, but with it a test worker crashed in XLA's CPU compiler in two full runs of
+# the suite (without it, about once per full run too; the cause is unknown); users may set
+# it in `XLA_FLAGS` themselves.
