@@ -452,8 +452,8 @@ def _grid_arrivals(ts, dt, steps):
 
 
 def _chunk_plan(stream, dt, n_steps, saveat, adjoint):
-    """`(steps per chunk, number of full chunks, steps left, samples per chunk, samples of
-    the last partial chunk)` for a stream with `measure`: static sizes, so that every chunk
+    """`(steps per chunk, number of full chunks, steps left, samples per chunk)` for a
+    stream with `measure`: static sizes, so that every chunk (the padded last one too)
     prepares the same number of samples. With `CheckpointAdjoint` the chunks are its
     checkpointed blocks."""
     n = jnp.shape(stream.ts)[0]
@@ -467,7 +467,7 @@ def _chunk_plan(stream, dt, n_steps, saveat, adjoint):
     size = min(size, n_steps)
     nc, rest = divmod(n_steps, size)
     if dt is None:
-        return size, nc, rest, min(size, n), min(max(rest, 1), n)
+        return size, nc, rest, min(size, n)
     ts = _concrete(stream.ts)  # concrete: `_n_steps` has checked
     arrived = _grid_arrivals(ts, dt, np.arange(n_steps))
     # the samples a chunk needs; 2 spare for rounding between NumPy and the traced grid
@@ -475,7 +475,8 @@ def _chunk_plan(stream, dt, n_steps, saveat, adjoint):
     span = int((full[:, -1] - full[:, 0]).max()) + 3 if nc else 1
     tail = arrived[nc * size :]
     span_tail = int(tail[-1] - tail[0]) + 3 if rest else 1
-    return size, nc, rest, min(max(span, span_tail), n), min(span_tail, n)
+    # (the padded last chunk is sliced with the full chunks' span, so it must cover its own)
+    return size, nc, rest, min(max(span, span_tail), n)
 
 
 @eqx.filter_jit
@@ -522,7 +523,7 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
 
     lazy = stream.measure is not None
     if lazy:
-        size, nc, rest, span, span_tail = plan
+        size, nc, rest, span = plan
 
         def prepare(j0, span):
             """The measurements of the `span` samples from the one held at step `j0`."""
