@@ -55,3 +55,30 @@ def positive_finite(x):
     """True (a traced bool) when every entry of `x` is finite and positive (NaN fails)."""
     x = jnp.asarray(x)
     return jnp.all(jnp.isfinite(x) & (x > 0))
+
+
+def chunked_map(f, xs, batch_size: int):
+    """`jax.vmap(f)` over the leading axis of `xs`, `batch_size` entries at a time (a
+    `lax.scan` over chunks, so that only one chunk's intermediates exist at once).
+
+    Unlike `jax.lax.map(..., batch_size=...)` a length that is not a multiple of
+    `batch_size` does not compile `f` a second time for the remainder: the last chunk is
+    the last `batch_size` entries (overlapping the one before), and the overlap is dropped.
+    """
+    n = jax.tree_util.tree_leaves(xs)[0].shape[0]
+    b = max(1, min(int(batch_size), n))
+    nb = -(-n // b)
+
+    def body(_, i):
+        start = jnp.minimum(i * b, n - b)
+        part = jax.tree_util.tree_map(lambda x: jax.lax.dynamic_slice_in_dim(x, start, b), xs)
+        return None, jax.vmap(f)(part)
+
+    _, ys = jax.lax.scan(body, None, jnp.arange(nb))
+    head = (nb - 1) * b
+
+    def assemble(y):
+        flat = y[:-1].reshape((head,) + y.shape[2:])
+        return jnp.concatenate([flat, y[-1, b - (n - head) :]])
+
+    return jax.tree_util.tree_map(assemble, ys)

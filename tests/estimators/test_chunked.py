@@ -165,3 +165,27 @@ def test_frame_measure_under_jit_vmap_grad(streams):
     d = jnp.zeros_like(frames[0]).at[2, 1].set(h)
     fd = jax.vmap(lambda p: (f(p + d) - f(p - d)) / (2 * h))(frames)
     np.testing.assert_allclose(g[:, 2, 1], fd, rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("n, batch", [(12, 4), (13, 4), (3, 8), (1, 1)])
+def test_chunked_map_equals_vmap(n, batch):
+    """`chunked_map` is `vmap` for any length (a last chunk overlapping the one before),
+    under `jit` and `grad`; and its function is compiled once, not again for a remainder
+    (as `lax.map(..., batch_size=...)` does)."""
+    from visjax._util import chunked_map
+
+    def f(x):
+        return {"a": jnp.sinh(x[0]) * x[1], "b": jnp.stack([x[0], x[1] ** 2])}
+
+    xs = jnp.linspace(-1.0, 2.0, 2 * n).reshape(n, 2)
+    got = jax.jit(lambda xs: chunked_map(f, xs, batch))(xs)
+    _close(got, jax.vmap(f)(xs), tol=1e-15)
+    assert got["b"].shape == (n, 2)
+
+    def loss(xs, m):
+        return jnp.sum(m(xs)["a"] ** 2)
+
+    g = jax.grad(loss)(xs, lambda xs: chunked_map(f, xs, batch))
+    _close(g, jax.grad(loss)(xs, jax.vmap(f)), tol=1e-13)
+    text = jax.jit(lambda xs: chunked_map(f, xs, batch)).lower(xs).as_text()
+    assert text.count("sinh") == 1

@@ -176,3 +176,39 @@ def test_no_xla_cpu_deadlock_with_several_batched_lapack_calls():
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "concurrency_optimized_scheduler=false" in done.stdout
+
+
+@pytest.mark.parametrize("preset", ["", "--xla_cpu_use_fusion_emitters=true", "keep"])
+def test_xla_options_on_import(preset):
+    """`import visjax` appends its XLA options unless `XLA_FLAGS` names them already or
+    `VISJAX_KEEP_XLA_FLAGS` is set; the emitter option only on jaxlib 0.10 (where it was
+    measured), and XLA's CPU backend starts with them (an unknown option would abort)."""
+    import importlib.metadata
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import visjax, jax, jax.numpy as jnp, os\n"
+        "assert float(jax.jit(lambda x: x + 1.0)(jnp.ones(3))[0]) == 2.0\n"
+        "print(os.environ.get('XLA_FLAGS', ''))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "VISJAX_KEEP_XLA_FLAGS")}
+    if preset == "keep":
+        env["VISJAX_KEEP_XLA_FLAGS"] = "1"
+    elif preset:
+        env["XLA_FLAGS"] = preset
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    flags = done.stdout.split()
+    on_010 = importlib.metadata.version("jaxlib").startswith("0.10.")
+    if preset == "keep":
+        assert flags == []
+    elif preset:
+        assert flags == [preset, "--xla_cpu_enable_concurrency_optimized_scheduler=false"]
+    else:
+        want = ["--xla_cpu_enable_concurrency_optimized_scheduler=false"]
+        want += ["--xla_cpu_use_fusion_emitters=false"] if on_010 else []
+        assert flags == want

@@ -9,7 +9,6 @@ sample arrives, checks the state after every step, and returns a `Solution` that
 carries a result code.
 """
 
-import functools
 import math
 from collections.abc import Callable
 from typing import final
@@ -22,6 +21,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from .._results import RESULTS, all_finite
+from .._util import chunked_map
 
 
 class AbstractEstimator(eqx.Module):
@@ -139,11 +139,11 @@ class Stream(eqx.Module):
 
     def measured(self, batch_size: int | None = None) -> "Stream":
         """The same stream with every measurement prepared (`measure` applied to every
-        sample, `batch_size` at a time: `jax.lax.map`), e.g. to inspect them or to feed a
+        sample, `batch_size` at a time), e.g. to inspect them or to feed a
         batch method; the identity without `measure`. Memory: N prepared samples."""
         if self.measure is None:
             return self
-        ys = jax.lax.map(self.measure, self.ys, batch_size=batch_size or self.chunk)
+        ys = chunked_map(self.measure, self.ys, batch_size or self.chunk)
         return Stream(ts=self.ts, ys=ys, truth=self.truth, present=self.present)
 
 
@@ -333,18 +333,32 @@ def _n_steps(ts, dt) -> int:
     return int(math.floor(span / dt * (1 + 1e-12) + 1e-9)) + 1
 
 
-def _precheck(estimator, y0, h_max, solver):
+@eqx.filter_jit
+def _first_bound(estimator, stream):
+    """`estimator.max_stable_dt` at the first sample, compiled: a bound that does not
+    depend on the sample does not compute it (one program, not an eager op per line)."""
+    return estimator.max_stable_dt(stream.measurement(0))
+
+
+@eqx.filter_jit
+def _first_finite(stream):
+    """Whether the first sample is finite, compiled."""
+    return all_finite(stream.measurement(0))
+
+
+def _precheck(estimator, stream, h_max, solver):
     """Refuse, before running, settings and steps that are concretely wrong."""
     for ok, message in estimator.checks():
         ok = _concrete(jnp.all(ok))
         if ok is not None and not ok:
             raise ValueError(f"{type(estimator).__name__}: {message}")
     if isinstance(solver, diffrax.Euler):
-        bound = _concrete(estimator.max_stable_dt(y0))
+        bound = _concrete(_first_bound(estimator, stream))
         h = _concrete(h_max)
-        y0_finite = _concrete(all_finite(y0))
-        known = bound is not None and h is not None and y0_finite is not None and y0_finite
-        if known and not h <= bound:
+        if bound is None or h is None or h <= bound:
+            return
+        # a non-finite first sample is reported by the run's result, not as a step error
+        if _concrete(_first_finite(stream)):
             raise ValueError(
                 f"the integration step {float(h):.4g} s exceeds the Euler stability bound "
                 f"{float(bound):.4g} s of {type(estimator).__name__}'s gains: the run would "
@@ -434,9 +448,8 @@ def run(
     present0 = None if stream.present is None else _concrete(stream.present[0])
     if present0 is not None and not present0:
         raise ValueError("`stream.present[0]` is False: the first sample must be present.")
-    y0 = stream.measurement(0)
     h_max = jnp.max(jnp.diff(stream.ts)) if dt is None else jnp.asarray(dt)
-    _precheck(estimator, y0, h_max, solver)
+    _precheck(estimator, stream, h_max, solver)
     plan = None if stream.measure is None else _chunk_plan(stream, dt, n_steps, saveat, adjoint)
     return _run(
         estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint, state0, throw
@@ -529,46 +542,48 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
             """The measurements of the `span` samples from the one held at step `j0`."""
             start = jnp.clip(arrived_sample(j0), 0, n - span)
             raw = jax.tree_util.tree_map(lambda x: jax.lax.dynamic_slice_in_dim(x, start, span), ys)
-            return start, jax.vmap(stream.measure)(raw)
-
-        # the first chunk is prepared before the loop, and the initial state is built from
-        # its first sample: the same value the loop holds, to the last bit (the sign-based
-        # laws start from e - e_hat = 0 exactly)
-        first = prepare(jnp.zeros((), jnp.int32), span)
-        y0 = at(first[1], 0)
-    else:
-        y0 = at(ys, 0)
-    state = estimator.init(y0) if state0 is None else state0
+            local = jax.vmap(stream.measure)(raw)
+            # each sample's finiteness, batched over the chunk (not tested again per step)
+            return start, local, jax.vmap(all_finite)(local)
 
     # gains and constants, and the step against the declared stability bound
     checks = estimator.checks()
     settings_ok = jnp.all(jnp.stack([jnp.all(ok) for ok, _ in checks] + [jnp.array(True)]))
-    stable = jnp.array(True)
-    if isinstance(solver, diffrax.Euler):
-        stable = h_max <= jax.lax.stop_gradient(estimator.max_stable_dt(y0))
-    r = RESULTS.successful
-    r = RESULTS.where(~(all_finite(state) & estimator.valid(state, y0)), RESULTS.diverged, r)
-    r = RESULTS.where(~all_finite(state), RESULTS.nonfinite_state, r)
-    r = RESULTS.where(~stable, RESULTS.unstable_step, r)
-    # a bad first sample is named as such, not by the step bound computed from it
-    r = RESULTS.where(~all_finite(y0), RESULTS.nonfinite_measurement, r)
-    if stream.present is not None:
-        r = RESULTS.where(stream.present[0], r, RESULTS.nonfinite_measurement)
-    r = RESULTS.where(~settings_ok, RESULTS.invalid_settings, r)
-    failed = jnp.where(r == RESULTS.successful, -1, 0).astype(jnp.int32)
+
+    def begin(y0, y0_finite):
+        """The initial state, reducer and result code from the first sample `y0`."""
+        state = estimator.init(y0) if state0 is None else state0
+        stable = jnp.array(True)
+        if isinstance(solver, diffrax.Euler):
+            stable = h_max <= jax.lax.stop_gradient(estimator.max_stable_dt(y0))
+        r = RESULTS.successful
+        r = RESULTS.where(~(all_finite(state) & estimator.valid(state, y0)), RESULTS.diverged, r)
+        r = RESULTS.where(~all_finite(state), RESULTS.nonfinite_state, r)
+        r = RESULTS.where(~stable, RESULTS.unstable_step, r)
+        # a bad first sample is named as such, not by the step bound computed from it
+        r = RESULTS.where(~y0_finite, RESULTS.nonfinite_measurement, r)
+        if stream.present is not None:
+            r = RESULTS.where(stream.present[0], r, RESULTS.nonfinite_measurement)
+        r = RESULTS.where(~settings_ok, RESULTS.invalid_settings, r)
+        failed = jnp.where(r == RESULTS.successful, -1, 0).astype(jnp.int32)
+        acc = None
+        if reducer is not None:
+            acc = reducer.init(estimator.output(ts[0], state, y0), at(truth, 0))
+        y_held0 = y0 if (lazy and stream.present is not None) else None
+        count = jnp.zeros((), jnp.int32)
+        return (state, acc, r, failed, count, jnp.full((), -1, jnp.int32), y_held0)
 
     term = diffrax.ODETerm(lambda t, s, y: estimator.vector_field(t, s, y))
-    acc = None
-    if reducer is not None:
-        acc = reducer.init(estimator.output(ts[0], state, y0), at(truth, 0))
 
     has_jump = type(estimator).jump is not AbstractEstimator.jump
 
     def eager_sample(j, y_held):
-        return at(ys, held_sample(j))
+        y = at(ys, held_sample(j))
+        return y, all_finite(y)
 
     def step(carry, save: bool, sample):
-        """One integration step; `sample(j, y_held)` is the measurement held at step j."""
+        """One integration step; `sample(j, y_held)` is the measurement held at step j
+        and whether it is finite."""
         state_in, acc, r, failed, j_count, k_prev, y_held = carry
         # past the end (the padding of the last chunk) the last step is repeated with a
         # zero step: the state does not move, the reducer skips it, its saves are dropped
@@ -577,7 +592,7 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
         t0 = grid_time(j)
         t1 = grid_time(jnp.minimum(j + 1, last))  # the last point is not integrated past
         k = held_sample(j)
-        y = sample(j, y_held)
+        y, y_finite = sample(j, y_held)
         if has_jump:
             state = jax.lax.cond(
                 k != k_prev, lambda s, y: estimator.jump(s, y), lambda s, y: s, state_in, y
@@ -649,47 +664,50 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
             saved = tail if saved is None else _concat(saved, tail)
         return carry, saved
 
-    y_held0 = y0 if (lazy and stream.present is not None) else None
-    carry = (state, acc, r, failed, jnp.zeros((), jnp.int32), jnp.full((), -1, jnp.int32), y_held0)
     if not lazy:
-        carry, saved = steps(carry, n_steps, eager_sample, adjoint)
+        y0 = at(ys, 0)
+        carry, saved = steps(begin(y0, all_finite(y0)), n_steps, eager_sample, adjoint)
     else:
 
         def held_from(prepared):
-            start, local = prepared
+            start, local, finite = prepared
 
             def sample(j, y_held):
                 ka = arrived_sample(j)
-                y = at(local, ka - start)
+                y, y_finite = at((local, finite), ka - start)
                 if y_held is None:
-                    return y
-                # a dropped sample: the latest present one goes on being held
-                return jax.tree_util.tree_map(
-                    lambda a, b: jnp.where(stream.present[ka], a, b), y, y_held
-                )
+                    return y, y_finite
+                # a dropped sample: the latest present one goes on being held (it was
+                # tested when it arrived: a non-finite one has stopped the run there)
+                here = stream.present[ka]
+                y = jax.tree_util.tree_map(lambda a, b: jnp.where(here, a, b), y, y_held)
+                return y, y_finite | ~here
 
             return sample
 
-        def one_chunk(c, _):
-            return steps(c, size, held_from(prepare(c[4], span)), DirectAdjoint())
+        def one_chunk(c, first):
+            prepared = prepare(c[4], span)
+            # the first chunk starts the run from its first sample (the value the loop
+            # holds, to the last bit: the sign-based laws start from e - e_hat = 0
+            # exactly); one chunk body, so the measurement and the step are compiled once
+            fresh = begin(at(prepared[1], 0), prepared[2][0])
+            c = jax.tree_util.tree_map(lambda a, b: jnp.where(first, a, b), fresh, c)
+            return steps(c, size, held_from(prepared), DirectAdjoint())
 
         if isinstance(adjoint, CheckpointAdjoint):
             one_chunk = jax.checkpoint(one_chunk)
-        carry, saved = steps(carry, size, held_from(first), DirectAdjoint())
-        parts = [saved]
-        # the other chunks, the last one padded to `size` steps: one compiled chunk body
-        more_chunks = nc - 1 + (1 if rest else 0)
-        if more_chunks:
-            carry, more = jax.lax.scan(one_chunk, carry, None, length=more_chunks)
-            if more is not None:
-                more = jax.tree_util.tree_map(
-                    lambda y: y.reshape((y.shape[0] * y.shape[1],) + y.shape[2:]), more
-                )
-            parts.append(more)
+        # the last chunk padded to `size` steps; the carry's first value is a placeholder
+        # of the right structure, replaced in the first chunk
+        n_chunks = nc + (1 if rest else 0)
+        like = jax.eval_shape(lambda: begin(*at(prepare(jnp.zeros((), jnp.int32), span)[1:], 0)))
+        placeholder = jax.tree_util.tree_map(lambda x: jnp.zeros(x.shape, x.dtype), like)
+        firsts = jnp.arange(n_chunks) == 0
+        carry, saved = jax.lax.scan(one_chunk, placeholder, firsts)
         if saved is not None:
             n_saved = len(range(0, n_steps, saveat.every))
-            saved = functools.reduce(_concat, parts)
-            saved = jax.tree_util.tree_map(lambda y: y[:n_saved], saved)
+            saved = jax.tree_util.tree_map(
+                lambda y: y.reshape((y.shape[0] * y.shape[1],) + y.shape[2:])[:n_saved], saved
+            )
     state, acc, r, failed = carry[:4]
     outputs, diagnostics, states = (None, None, None) if saved is None else saved
     saved_ts = None

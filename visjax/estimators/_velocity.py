@@ -23,7 +23,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, raise_or_keep
 from .._small import inv3, mm, mv, sall
-from .._util import as_float, check_points, check_shape, positive_finite
+from .._util import as_float, check_points, check_shape, chunked_map, positive_finite
 from ..geometry import (
     L_omega,
     L_omega_inv,
@@ -388,7 +388,7 @@ def _normal_from_frames(p_ref, p_frames, A, n_prior, visible):
         return w, w * rec.n_star
 
     # 256 frames at a time: the reconstructions of a long run never exist all at once
-    w, wn = jax.lax.map(weighted, (p_frames, visible), batch_size=256)
+    w, wn = chunked_map(weighted, (p_frames, visible), 256)
     n = jnp.sum(wn, axis=0)
     n = eqx.error_if(
         n, ~(jnp.sum(w) > 0.0), "No frame moves away from the reference pose: n* is unobservable."
@@ -501,8 +501,8 @@ class VelocityEstimator(AbstractEstimator):
         return VelocityDiagnostics(e_tilde=e_tilde, kappa_hat=kappa)
 
     def valid(self, state: VelocityState, y=None):
-        big = jnp.maximum(jnp.max(jnp.abs(state.e_hat)), jnp.max(jnp.abs(state.eta)))
-        return big < self.bound
+        # every entry below the bound (a NaN is not); elementwise, fused with the step
+        return sall(jnp.abs(state.e_hat) < self.bound) & sall(jnp.abs(state.eta) < self.bound)
 
 
 @final
@@ -542,7 +542,7 @@ class FrameMeasure(eqx.Module):
 @eqx.filter_jit
 def _frame_results(measure, pixels, batch_size):
     """The result code of every frame, `batch_size` frames at a time (nothing else kept)."""
-    return jax.lax.map(lambda pc: measure(pc).result, pixels, batch_size=batch_size)
+    return chunked_map(lambda pc: measure(pc).result, pixels, batch_size)
 
 
 def fixed_camera_stream(
@@ -651,9 +651,12 @@ def fixed_camera_stream(
                     present, ~present[0], "fixed_camera_stream: the first frame cannot be measured."
                 )
         else:
-            # the first frame that cannot be measured raises with its own message
+            # the first frame that cannot be measured raises with its own message (the
+            # check rides on the reference pixels, which every measurement reads: no copy
+            # of the frames)
             bad = results != RESULTS.successful
             first = jax.tree_util.tree_map(lambda v: v[jnp.argmax(bad)], results)
-            pixels = first.error_if(pixels, jnp.any(bad))
+            checked = first.error_if(measure.p_ref, jnp.any(bad))
+            measure = eqx.tree_at(lambda m: m.p_ref, measure, checked)
     stream = Stream(ts=ts, ys=pixels, truth=truth, present=present, measure=measure, chunk=chunk)
     return stream, n_star, z1_star
