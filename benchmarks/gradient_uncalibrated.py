@@ -11,7 +11,7 @@ over `--batch` gain settings (log-uniform in [0.5, 2]) and run, under `Checkpoin
 Reported: XLA's buffer assignment of the compiled gradient (`memory_analysis()`, bytes) for
 `CheckpointAdjoint` and, compiled only (its buffers would not fit), `DirectAdjoint`, their
 ratio; the peak resident memory of this process while the checkpointed gradient runs
-(`ru_maxrss`), against the same process's peak after the forward run alone (the
+(`VmHWM`, see `_memory.py`), against the same process's peak after the forward run alone (the
 reference measured in the same run); wall times; and whether every gradient is finite.
 
     python benchmarks/gradient_uncalibrated.py [--duration 30] [--batch 256]
@@ -19,7 +19,6 @@ reference measured in the same run); wall times; and whether every gradient is f
 
 import argparse
 import json
-import resource
 import time
 
 import jax
@@ -27,12 +26,14 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
+from _memory import peak_rss_mb  # noqa: E402
+
 from visjax import studies  # noqa: E402
 from visjax.estimators import CheckpointAdjoint, DirectAdjoint  # noqa: E402
 
 
 def rss_mb():
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return peak_rss_mb()
 
 
 def xla_bytes(compiled):

@@ -5,7 +5,7 @@ at 1 kHz) of the section-6 simulation. Prints JSON.
 The pixels are simulated first and written to a temporary `.npy` file; a fresh process
 then loads them, builds the stream (`fixed_camera_stream`, $n^*$ and $z_1^*$ given, the
 result-code pass over every frame included) and runs the estimator, saving one output in
-1,000, and reports its peak resident memory (`ru_maxrss`). The reference, in the same
+1,000, and reports its peak resident memory (`VmHWM`, see `_memory.py`). The reference, in the same
 run, is the same process on the first 10^4 steps: the difference is what the length costs
 (the pixels themselves are 64 bytes per sample, 64 MB for 10^6).
 
@@ -19,8 +19,12 @@ import subprocess
 import sys
 import tempfile
 
+HERE = str(pathlib.Path(__file__).resolve().parent)
+
 CHILD = r"""
-import json, resource, sys, time
+import json, sys, time
+sys.path.insert(0, sys.argv[4])
+from _memory import peak_rss_mb
 import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 from visjax.estimators import SaveAt, VelocityEstimator, fixed_camera_stream, run
@@ -44,7 +48,7 @@ print(json.dumps({
     "saved": int(v.shape[0]),
     "finite": bool(np.all(np.isfinite(v))),
     "successful": bool(sol.result == RESULTS.successful),
-    "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    "peak_rss_mb": peak_rss_mb(),
 }))
 """
 
@@ -77,7 +81,7 @@ def main():
         rows = []
         for steps in (min(10_000, n), n):
             out = subprocess.run(
-                [sys.executable, "-c", CHILD, folder, str(steps), str(args.chunk)],
+                [sys.executable, "-c", CHILD, folder, str(steps), str(args.chunk), HERE],
                 capture_output=True,
                 text=True,
                 check=True,

@@ -6,7 +6,7 @@ resident memory is its own.
 
 Reported per batch: trajectory-steps per second after compilation (median of `--repeats`
 timed sweeps), the compile-inclusive first sweep, the peak resident memory of the process
-(`ru_maxrss`), and the throughput as a ratio against batch 1 measured in the same run.
+(`VmHWM`, see `_memory.py`), and the throughput as a ratio against batch 1 measured in the same run.
 Prints JSON.
 
     python benchmarks/sweep.py [--duration 1.0] [--batches 1 64 1024 16384] [--chunk 1024]
@@ -14,11 +14,14 @@ Prints JSON.
 
 import argparse
 import json
+import pathlib
 import subprocess
 import sys
 
 CHILD = r"""
-import json, resource, statistics, sys, time
+import json, statistics, sys, time
+sys.path.insert(0, sys.argv[5])
+from _memory import peak_rss_mb
 import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 from visjax import studies
@@ -46,7 +49,7 @@ print(json.dumps({
     "first_call_s": first,
     "trajectory_steps_per_s": batch * steps / wall,
     "ns_per_trajectory_step": 1e9 * wall / (batch * steps),
-    "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    "peak_rss_mb": peak_rss_mb(),
     "failed": int((table["result"] != "successful").sum()),
 }))
 """
@@ -71,6 +74,7 @@ def main():
                 str(args.duration),
                 str(args.chunk),
                 str(repeats),
+                str(pathlib.Path(__file__).resolve().parent),
             ],
             capture_output=True,
             text=True,

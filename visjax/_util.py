@@ -2,6 +2,7 @@
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 def as_float(x):
@@ -16,7 +17,12 @@ def as_float(x):
 
 
 def _as_float(x):
-    x = jnp.asarray(x)
+    if isinstance(x, np.ndarray) and x.dtype == jax.dtypes.canonicalize_dtype(x.dtype):
+        # `device_put` copies a NumPy array once (or shares a read-only memory map, as JAX
+        # decides); `jnp.asarray` of a large unaligned array held two copies at its peak
+        x = jax.device_put(x)
+    else:
+        x = jnp.asarray(x)
     if not jnp.issubdtype(x.dtype, jnp.floating):
         x = x.astype(jnp.result_type(float))
     return x

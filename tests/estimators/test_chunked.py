@@ -189,3 +189,20 @@ def test_chunked_map_equals_vmap(n, batch):
     _close(g, jax.grad(loss)(xs, jax.vmap(f)), tol=1e-13)
     text = jax.jit(lambda xs: chunked_map(f, xs, batch)).lower(xs).as_text()
     assert text.count("sinh") == 1
+
+
+def test_as_float_copies_a_writable_numpy_array(tmp_path):
+    """`as_float` (every input of the library) takes NumPy arrays with `device_put`: the
+    values and dtype are kept, integers become floats, and a writable array changed
+    afterwards does not change the JAX array (a read-only memory map may be shared)."""
+    from visjax._util import as_float
+
+    a = np.arange(4096.0).reshape(512, 8)
+    x = as_float(a)
+    a[0, 0] = -1.0
+    assert x.dtype == jnp.float64 and float(x[0, 0]) == 0.0
+    np.testing.assert_array_equal(np.asarray(x)[1:], a[1:])
+    assert as_float(np.arange(3)).dtype == jnp.float64
+    np.save(tmp_path / "a.npy", a)
+    m = as_float(np.load(tmp_path / "a.npy", mmap_mode="r"))
+    np.testing.assert_array_equal(np.asarray(m), a)

@@ -491,9 +491,10 @@ class VelocityEstimator(AbstractEstimator):
 
     def output(self, t, state: VelocityState, y: VelocityMeasurement) -> VelocityOutput:
         kappa, _ = self._kappa(state, y)
-        v_hat = y.J_inv @ kappa  # Theorem 2: v_hat = J^{-1} kappa_hat
+        # (unrolled products: a per-step 6x6 `dot` is a kernel call of its own on a CPU)
+        v_hat = mv(y.J_inv, kappa)  # Theorem 2: v_hat = J^{-1} kappa_hat
         # Remark 6: the same velocity in the object frame, with R = R_bar R* (eq. (8))
-        v_object = jnp.concatenate([y.R.T @ v_hat[:3], y.R.T @ v_hat[3:]])
+        v_object = jnp.concatenate([mv(y.R.T, v_hat[:3]), mv(y.R.T, v_hat[3:])])
         return VelocityOutput(v_hat=v_hat, v_object=v_object)
 
     def diagnostics(self, t, state: VelocityState, y: VelocityMeasurement):
