@@ -127,6 +127,12 @@ def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
     assert set(bad["result"]) == {"unstable_step"} and bad["rms_worst"].isna().all()
     ok = table[table["K"] < 10.0]
     assert (ok["result"] == "successful").all() and np.isfinite(ok["rms_worst"]).all()
+    # the stream's chunk (a speed setting) does not change a number
+    small = studies.velocity_tuning(noise_px=0.1, duration=2.0, chunk=16)
+    assert small.settings["chunk"] == 16 and velocity.settings["chunk"] == 256
+    p, key = {"K": jnp.array(1.0), "rho": jnp.array(1.0)}, jax.random.key(1)
+    m16 = eqx.filter_jit(lambda p, k: small.metrics(small.factory(p, k)))(p, key)
+    np.testing.assert_allclose(m16["rms"], one(p, key)["rms"], rtol=1e-10, atol=0)
 
 
 def test_tune_lowers_velocity_loss_tenfold_and_gradients(velocity):
