@@ -128,6 +128,9 @@ def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
     ok = table[table["K"] < 10.0]
     assert (ok["result"] == "successful").all() and np.isfinite(ok["rms_worst"]).all()
     # the stream's chunk (a speed setting) does not change a number
+    for bad in (0, -3):
+        with pytest.raises(ValueError, match="chunk"):
+            studies.velocity_tuning(duration=2.0, chunk=bad)
     small = studies.velocity_tuning(noise_px=0.1, duration=2.0, chunk=16)
     assert small.settings["chunk"] == 16 and velocity.settings["chunk"] == 256
     p, key = {"K": jnp.array(1.0), "rho": jnp.array(1.0)}, jax.random.key(1)

@@ -88,6 +88,8 @@ def velocity_tuning(
     from ..papers.chitrakaran import window
     from ._problems import velocity_source
 
+    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+        raise ValueError(f"`chunk` must be a positive int (frames per chunk); got {chunk!r}.")
     adj = DirectAdjoint() if adjoint is None else adjoint
     v = velocity_source(data, duration, rate_hz)
     if v.truth is None:
