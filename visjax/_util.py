@@ -18,9 +18,12 @@ def as_float(x):
 
 def _as_float(x):
     if isinstance(x, np.ndarray) and x.dtype == jax.dtypes.canonicalize_dtype(x.dtype):
-        # `device_put` copies a NumPy array once (or shares a read-only memory map, as JAX
-        # decides); `jnp.asarray` of a large unaligned array held two copies at its peak
-        x = jax.device_put(x)
+        # `device_put` copies a NumPy array once or, when its memory is aligned, shares it
+        # (a read-only memory map then costs no copy); `jnp.asarray` of a large unaligned
+        # array held two copies at its peak. A writable array is copied first, so that
+        # changing it afterwards never changes the JAX array (aliasing depended on where
+        # the allocator put it).
+        x = jax.device_put(x.copy() if x.flags.writeable else x)
     else:
         x = jnp.asarray(x)
     if not jnp.issubdtype(x.dtype, jnp.floating):
