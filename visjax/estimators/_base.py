@@ -619,7 +619,7 @@ def _run(estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint,
         code = RESULTS.where(
             solver_r == diffrax.RESULTS.successful, code, RESULTS.promote(solver_r)
         )
-        code = RESULTS.where(all_finite(y), code, RESULTS.nonfinite_measurement)
+        code = RESULTS.where(y_finite, code, RESULTS.nonfinite_measurement)
         newly = (failed < 0) & (code != RESULTS.successful)
         r = RESULTS.where(newly, code, r)
         failed = jnp.where(newly, k, failed).astype(jnp.int32)
