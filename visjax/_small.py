@@ -13,6 +13,77 @@ import math
 import jax
 import jax.numpy as jnp
 
+# Small matrices as rows of scalars. Under `vmap` on a CPU, every operation on a scalar is
+# one elementwise operation over the batch, which XLA fuses into few loops; the same
+# formulas on (3, 3) arrays compile to many small fusions of strided slices and
+# concatenations, each a pass over the batch. `rows` and `from_rows` convert at the
+# boundaries of a computation (XLA folds a slice of a stack into its operand).
+
+
+def rows(M):
+    """A small matrix as a list of rows of scalars (a vector as a list of scalars)."""
+    if M.ndim == 1:
+        return [M[i] for i in range(M.shape[0])]
+    return [[M[i, j] for j in range(M.shape[1])] for i in range(M.shape[0])]
+
+
+def from_rows(R, dtype):
+    """The array of `dtype` of a list of rows of scalars (or of a list of scalars); Python
+    numbers among them become constants of `dtype`."""
+    if isinstance(R[0], (list, tuple)):
+        return jnp.stack([from_rows(r, dtype) for r in R])
+    return jnp.stack([jnp.asarray(x, dtype) for x in R])
+
+
+def total(xs):
+    """The sum of a list of scalars."""
+    out = xs[0]
+    for x in xs[1:]:
+        out = out + x
+    return out
+
+
+def _is_zero(x):
+    return isinstance(x, float) and x == 0.0
+
+
+def sdot(a, b):
+    """The dot product of two lists of scalars (terms with a literal 0.0 are skipped)."""
+    terms = [x * y for x, y in zip(a, b) if not (_is_zero(x) or _is_zero(y))]
+    return total(terms) if terms else 0.0
+
+
+def scross(a, b):
+    """The cross product of two 3-lists of scalars."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def smm(A, B):
+    """The product of two matrices given by rows of scalars."""
+    return [[sdot(r, [b[j] for b in B]) for j in range(len(B[0]))] for r in A]
+
+
+def smv(A, x):
+    """A matrix (rows of scalars) times a vector (a list of scalars)."""
+    return [sdot(r, x) for r in A]
+
+
+def stranspose(A):
+    """The transpose of a matrix given by rows of scalars."""
+    return [list(c) for c in zip(*A)]
+
+
+def sskew(v):
+    """$[v]_\\times$ of a 3-list of scalars, as rows (zeros as Python floats)."""
+    return [[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]]
+
+
+def sadjugate(B):
+    """The adjugate of a 3x3 matrix given by rows: its rows are the cross products of
+    the columns."""
+    c = stranspose(B)
+    return [scross(c[1], c[2]), scross(c[2], c[0]), scross(c[0], c[1])]
+
 
 def det2(S):
     """The determinant of a 2x2 matrix."""

@@ -15,7 +15,20 @@ import jax.scipy.linalg as jsl
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, intrinsics_ok, raise_or_keep
-from .._small import det3, inv3, mm, mv, sall, smax, ssum
+from .._small import (
+    det3,
+    inv3,
+    mm,
+    mv,
+    sadjugate,
+    sall,
+    scross,
+    sdot,
+    smax,
+    smm,
+    ssum,
+    total,
+)
 from .._util import as_float, check_points, check_shape
 from ._camera import to_homogeneous
 
@@ -52,36 +65,21 @@ def _normalising_transform(p, w=None):
 # compile to ~40 small fusions of slices and concatenations, each a pass over the batch.
 
 
-def _total(xs):
-    out = xs[0]
-    for x in xs[1:]:
-        out = out + x
-    return out
-
-
-def _cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
 def _normalising_scalars(u, v, w=None):
     """`_normalising_transform` on scalars: `(c_u, c_v, s, x, y)` with x, y the lists of
     normalised coordinates."""
     if w is None:
-        total = float(len(u))
-        cu, cv = _total(u) / total, _total(v) / total
+        count = float(len(u))
+        cu, cv = total(u) / count, total(v) / count
         du = [a - cu for a in u]
         dv = [b - cv for b in v]
     else:
-        total = jnp.maximum(_total(w), 1.0)
-        cu = _total([wi * a for wi, a in zip(w, u)]) / total
-        cv = _total([wi * b for wi, b in zip(w, v)]) / total
+        count = jnp.maximum(total(w), 1.0)
+        cu = total([wi * a for wi, a in zip(w, u)]) / count
+        cv = total([wi * b for wi, b in zip(w, v)]) / count
         du = [(a - cu) * wi for a, wi in zip(u, w)]
         dv = [(b - cv) * wi for b, wi in zip(v, w)]
-    ms = _total([a * a + b * b for a, b in zip(du, dv)]) / total
+    ms = total([a * a + b * b for a, b in zip(du, dv)]) / count
     s = jnp.sqrt(2.0 / jnp.where(ms > 0.0, ms, 1.0))
     return cu, cv, s, [a * s for a in du], [b * s for b in dv]
 
@@ -108,19 +106,8 @@ def _projective_basis(x, y):
     DLT of eq. (17)."""
     c = [(x[i], y[i], 1.0) for i in range(3)]
     p4 = (x[3], y[3], 1.0)
-    lam = (_dot(_cross(c[1], c[2]), p4), _dot(_cross(c[2], c[0]), p4), _dot(_cross(c[0], c[1]), p4))
+    lam = (sdot(scross(c[1], c[2]), p4), sdot(scross(c[2], c[0]), p4), sdot(scross(c[0], c[1]), p4))
     return [[lam[j] * c[j][i] for j in range(3)] for i in range(3)]
-
-
-def _adjugate(B):
-    """The adjugate of a 3x3 matrix given by rows: its rows are the cross products of the
-    columns."""
-    c = [[B[i][j] for i in range(3)] for j in range(3)]
-    return [list(_cross(c[1], c[2])), list(_cross(c[2], c[0])), list(_cross(c[0], c[1]))]
-
-
-def _matmul(A, B):
-    return [[_dot(A[i], (B[0][j], B[1][j], B[2][j])) for j in range(3)] for i in range(3)]
 
 
 def _undo_normalisation(G, ref, cur):
@@ -179,13 +166,13 @@ def _four_point(p_ref, p_cur, w, ref_bad, cur_bad, tol):
     # solving the 8x8 system
     B_cur = _projective_basis(*safe(cur[3], cur[4], cur_swap))
     B_ref = _projective_basis(*safe(ref[3], ref[4], ref_swap))
-    G_hat = _matmul(B_cur, _adjugate(B_ref))
-    size = jnp.sqrt(_total([g * g for row in G_hat for g in row]))
+    G_hat = smm(B_cur, sadjugate(B_ref))
+    size = jnp.sqrt(total([g * g for row in G_hat for g in row]))
     G_hat = [[g / size for g in row] for row in G_hat]  # its scale is arbitrary: unit norm
     # points collinear in one image only: a singular G (a predicate: no gradient)
     Gs = [[jax.lax.stop_gradient(g) for g in row] for row in G_hat]
-    norm2 = _total([g * g for row in Gs for g in row])
-    singular = ~(jnp.abs(_dot(Gs[0], _cross(Gs[1], Gs[2]))) > tol * norm2 * jnp.sqrt(norm2))
+    norm2 = total([g * g for row in Gs for g in row])
+    singular = ~(jnp.abs(sdot(Gs[0], scross(Gs[1], Gs[2]))) > tol * norm2 * jnp.sqrt(norm2))
     degenerate = ref_swap | cur_swap | singular
     return _undo_normalisation(G_hat, ref[:3], cur[:3]), degenerate
 

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._small import det3, dot, mm, sall, smax, ssum
+from .._small import det3, dot, from_rows, mm, rows, sall, smax, smm, sskew, ssum
 from .._util import as_float, check_shape
 
 
@@ -220,9 +220,26 @@ def L_omega(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
-    W = skew(e_omega)
-    c = _L_omega_coefficient(ssum(e_omega**2))
-    return jnp.eye(3, dtype=e_omega.dtype) - 0.5 * W + c * mm(W, W)
+    return from_rows(_L_omega_rows(rows(e_omega)), e_omega.dtype)
+
+
+def _eye_plus(a, W, b, W2):
+    """$I + a W + b W^2$ for rows of scalars (W skew, given by `sskew`)."""
+    return [[float(i == j) + a * W[i][j] + b * W2[i][j] for j in range(3)] for i in range(3)]
+
+
+def _L_omega_rows(e):
+    """`L_omega` (eq. (27)) of a 3-list of scalars, as rows."""
+    W = sskew(e)
+    c = _L_omega_coefficient(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    return _eye_plus(-0.5, W, c, smm(W, W))
+
+
+def _L_omega_inv_rows(e):
+    """`L_omega_inv` of a 3-list of scalars, as rows."""
+    _, b, c = _rotation_coefficients(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    W = sskew(e)
+    return _eye_plus(b, W, c, smm(W, W))
 
 
 def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
@@ -235,6 +252,4 @@ def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
-    _, b, c = _rotation_coefficients(ssum(e_omega**2))
-    W = skew(e_omega)
-    return jnp.eye(3, dtype=e_omega.dtype) + b * W + c * mm(W, W)
+    return from_rows(_L_omega_inv_rows(rows(e_omega)), e_omega.dtype)
