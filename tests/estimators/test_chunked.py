@@ -55,14 +55,15 @@ def _close(a, b, tol=1e-10):
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=0, atol=tol)
 
 
-@pytest.mark.parametrize("every", [1, 7])
-def test_chunked_equals_prepared(streams, every):
+@pytest.mark.parametrize("every, unroll", [(1, 1), (7, 8)])
+def test_chunked_equals_prepared(streams, every, unroll):
     """300 steps in chunks of 64 (4 full chunks and a tail of 44), saved every step and
-    every 7 (chunks rounded to whole saving periods), with a reducer: equal to 1e-10."""
+    every 7 (chunks rounded to whole saving periods), with a reducer, the fused run's loop
+    unrolled or not: equal to 1e-10."""
     lazy, eager = streams
     reducer = WindowRMS(0.1, 0.3, field="v_hat")
     kw = dict(saveat=SaveAt(every=every, diagnostics=True), reducer=reducer)
-    a, b = run(EST, lazy, **kw), run(EST, eager, **kw)
+    a, b = run(EST, lazy, unroll=unroll, **kw), run(EST, eager, **kw)
     assert a.outputs.v_hat.shape == b.outputs.v_hat.shape == (len(range(0, 300, every)), 6)
     _close(
         (a.ts, a.outputs, a.diagnostics, a.final_state),

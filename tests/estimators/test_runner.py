@@ -11,6 +11,7 @@ from visjax import RESULTS
 from visjax.estimators import (
     AbstractEstimator,
     CheckpointAdjoint,
+    DirectAdjoint,
     SaveAt,
     Stream,
     WindowRMS,
@@ -353,3 +354,40 @@ def test_dropped_samples_are_held_over():
         run(est, Stream(ts=stream.ts, ys=stream.ys, present=first_missing))
     with pytest.raises(ValueError, match="present"):
         run(est, Stream(ts=stream.ts, ys=stream.ys, present=present[:10]))
+
+
+@pytest.mark.parametrize("saveat", [SaveAt(states=True), SaveAt(every=7)])
+def test_unrolled_loop_gives_the_same_run(saveat):
+    """`unroll` changes how many steps one loop iteration holds, not the run: outputs,
+    states, reducer and result code equal the plain loop's, also for a failing run, under
+    `vmap`, and in the gradient (direct and checkpointed, where the blocks are unrolled)."""
+    stream = _stream(103)  # no multiple of any unroll below
+    est = LinearObserver(a=1.5, b=[1.0, -0.5])
+    red = WindowRMS(0.2, 0.8)
+    plain = run(est, stream, saveat=saveat, reducer=red)
+    for unroll in (2, 8, 200):
+        sol = run(est, stream, saveat=saveat, reducer=red, unroll=unroll)
+        np.testing.assert_allclose(sol.outputs, plain.outputs, rtol=1e-15, atol=1e-300)
+        np.testing.assert_allclose(sol.summary.rms, plain.summary.rms, rtol=1e-15)
+        np.testing.assert_allclose(sol.final_state, plain.final_state, rtol=1e-15)
+    # a run that diverges at a sample: the same result code, sample and frozen state
+    bad = jnp.where(stream.ts >= 0.5, 1e9, 1.0)[:, None] * stream.ys
+    failing = Stream(ts=stream.ts, ys=bad)
+    ref = run(est, failing, saveat=saveat, throw=False)
+    sol = run(est, failing, saveat=saveat, throw=False, unroll=8)
+    assert ref.result == RESULTS.diverged and sol.result == ref.result
+    assert int(sol.failed_sample) == int(ref.failed_sample) == 50
+    np.testing.assert_allclose(sol.final_state, ref.final_state, rtol=1e-15)
+    # vmap over gains and the gradient, both adjoints
+    gains = jnp.array([0.7, 1.5, 2.5])
+
+    def loss(a, unroll, adjoint):
+        sol = run(LinearObserver(a=a, b=jnp.array([1.0, 1.0])), stream, saveat=saveat,
+                  adjoint=adjoint, unroll=unroll)  # fmt: skip
+        return jnp.sum(sol.outputs**2)
+
+    for adjoint in (DirectAdjoint(), CheckpointAdjoint(9)):
+        grads = [jax.vmap(jax.grad(loss), (0, None, None))(gains, u, adjoint) for u in (1, 4)]
+        np.testing.assert_allclose(grads[1], grads[0], rtol=1e-13)
+    with pytest.raises(ValueError, match="`unroll` must be a positive int"):
+        run(est, stream, unroll=0)
