@@ -17,6 +17,13 @@ References timed in the same run, on the same trajectories:
   vmapped over `--batch` gain settings: ns per trajectory-step (what the loop itself
   costs, without the per-trajectory reconstruction).
 - `noise_only`: drawing the noise for the batch.
+- `measure_only`: the per-frame reconstruction, e, J, J^-1 alone (`stream.measure`),
+  `jit(vmap)` over `--batch` x `--chunk` noisy frames at once (what one fused chunk
+  prepares), in ns per frame, with XLA's count of the kernels it compiles to and of the
+  bytes they move per frame (`cost_analysis`).
+- `parts_ns_per_trajectory_step`: noise + measurement + loop, each timed alone at its
+  best: what the study would cost if the runner added nothing (a lower bound for this
+  code on this machine).
 
 The study is timed twice: with JAX's default random-number generator (threefry, counter
 based, the same noise on every backend) and with `impl="rbg"` keys (XLA's own generator,
@@ -30,6 +37,7 @@ import argparse
 import json
 import pathlib
 import platform
+import re
 import statistics
 import sys
 import time
@@ -52,6 +60,11 @@ from visjax.estimators import (  # noqa: E402
     run,
 )
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario  # noqa: E402
+
+# the operations of a compiled program that run as kernels of their own on a CPU
+KERNEL_OPS = {"fusion", "copy", "concatenate", "custom-call", "dynamic-slice", "reduce",
+              "dynamic-update-slice", "transpose", "select", "add", "multiply", "divide",
+              "subtract", "sqrt", "conditional", "while", "sort", "gather", "scatter"}  # fmt: skip
 
 
 def timed(f, *args, repeats):
@@ -115,6 +128,18 @@ def main():
     _, noise_s = timed(noise, keys, repeats=args.repeats)
     _, noise_rbg_s = timed(noise, keys_rbg, repeats=args.repeats)
 
+    frames = args.batch * min(args.chunk, steps)
+    noisy = jnp.resize(sc.pixels, (frames,) + sc.pixels.shape[1:])
+    noisy = noisy + 0.1 * jax.random.normal(jax.random.key(2), noisy.shape, noisy.dtype)
+    measure = jax.jit(jax.vmap(stream0.measure))
+    _, measure_s = timed(measure, noisy, repeats=args.repeats)
+    compiled = measure.lower(noisy).compile()
+    cost = compiled.cost_analysis()
+    cost = cost[0] if isinstance(cost, list) else cost
+    entry = compiled.as_text().split("\nENTRY", 1)[1]
+    ops = re.findall(r"^\s*\S+ = (?:\([^)]*\)|\S+) ([\w-]+)\(", entry, re.MULTILINE)
+    kernels = sum(op in KERNEL_OPS for op in ops)
+
     prepared = stream0.measured()
     prepared = type(prepared)(ts=prepared.ts, ys=prepared.ys, truth=sc.velocity)
     Ks = jnp.asarray(K_EQ63) * jnp.exp(0.1 * jax.random.normal(jax.random.key(1), (args.batch, 6)))
@@ -137,6 +162,7 @@ def main():
 
     per = 1e9 / (args.batch * steps)
     ns = study_s * per
+    measure_ns = 1e9 * measure_s / frames
     print(
         json.dumps(
             {
@@ -158,6 +184,12 @@ def main():
                 "noise_only_ns_per_trajectory_step": noise_s * per,
                 "noise_only_rbg_ns_per_trajectory_step": noise_rbg_s * per,
                 "loop_only_ns_per_trajectory_step": loop_s * per,
+                "measure_only_ns_per_frame": measure_ns,
+                "measure_frames": frames,
+                "measure_kernels": kernels,
+                "measure_bytes_per_frame": float(cost.get("bytes accessed", np.nan)) / frames,
+                "measure_flops_per_frame": float(cost.get("flops", np.nan)) / frames,
+                "parts_ns_per_trajectory_step": noise_s * per + measure_ns + loop_s * per,
                 "numpy_loop_ns_per_step": 1e9 * numpy_s / steps,
                 "speedup_vs_numpy_loop": 1e9 * numpy_s / steps / ns,
                 "target": {"ns_per_trajectory_step": "<= 300 at batch 1024"},

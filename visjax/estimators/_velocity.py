@@ -595,7 +595,9 @@ def fixed_camera_stream(
     $e$, $J$, $J^{-1}$ of each frame are computed by `run` in chunks of `chunk` steps fused
     with the time loop, so a run of any length needs memory for one chunk of prepared
     frames, not for the whole trajectory (`Stream.measured()` prepares them all, to look
-    at them).
+    at them). The default suits `vmap` over many runs (about 16,000 frames per chunk call,
+    batch x `chunk`, is fastest on a CPU); for one long trajectory `chunk=len(ts)` with
+    `run(..., unroll=8)` runs twice as fast (~700 bytes per prepared frame).
 
     With `throw=False` a frame that cannot be measured (a NaN pixel, degenerate points)
     is all NaN, and `run` stops there with `RESULTS.nonfinite_measurement` and its index;
