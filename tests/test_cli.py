@@ -4,7 +4,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from visjax.cli import main
+import visjax
+from visjax.cli import build_parser, main
 
 
 def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
@@ -95,12 +96,18 @@ def test_velocity_command(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "RMS" in printed and "vz" in printed
     summary = json.loads((tmp_path / "summary.json").read_text())
-    for key in ("rms_5_10s", "max_5_10s"):
+    for key in ("rms_window", "max_window"):
         assert len(summary[key]) == 6
     assert summary["window_s"] == [0.5, 1.0]  # the paper's 5-10 s, shrunk into 1 s
-    assert max(summary["rms_5_10s"]) < 0.1  # noise-free: already in the chattering band
+    assert max(summary["rms_window"]) < 0.1  # noise-free: already in the chattering band
     assert abs(summary["z1_star_recovered"] - 1.99) < 1e-8
     assert (tmp_path / "velocity.png").stat().st_size > 20_000
+    # what was run is recorded: version, every option, the seed (none: noise-free), time
+    assert summary["kind"] == "velocity" and summary["visjax_version"] == visjax.__version__
+    assert summary["settings"]["duration"] == 1.0 and summary["settings"]["K"][0] == 300.0
+    assert summary["seed"] is None and summary["wall_time_s"] > 0
+    estimate = np.load(tmp_path / "estimate.npz")
+    assert estimate["v_hat"].shape == estimate["velocity"].shape == (1000, 6)
 
 
 def test_velocity_rejects_bad_gains(capsys):
@@ -130,19 +137,61 @@ def test_structure_command(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "Table 5-3" in printed and "Table 5-4" in printed
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert set(summary) == {"I.1", "II.2"}
-    assert len(summary["II.2"]["rms"]) == 3
-    assert max(summary["I.1"]["rms"]) < 0.05  # metres, static point, 0.1 px
+    assert set(summary["sets"]) == {"I.1", "II.2"} and summary["seed"] == 0
+    assert len(summary["sets"]["II.2"]["rms"]) == 3
+    assert max(summary["sets"]["I.1"]["rms"]) < 0.05  # metres, static point, 0.1 px
     assert (tmp_path / "structure_I.1.png").stat().st_size > 20_000
+    # the thesis' camera-velocity figures (Figs. 5-5/5-6 and their like), m/s and rad/s
+    assert (tmp_path / "camera_velocity_II.2.png").stat().st_size > 10_000
 
 
 def test_euclidean_command(tmp_path, capsys):
-    assert main(["euclidean", "--duration", "3", "--quiet", "--out", str(tmp_path)]) == 0
+    argv = ["euclidean", "--duration", "3", "--quiet", "--format", "svg,pdf"]
+    assert main([*argv, "--out", str(tmp_path)]) == 0
     assert "final position error" in capsys.readouterr().out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert len(summary["final_position_error_m"]) == 4
     assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 3 s in
-    assert (tmp_path / "euclidean.png").stat().st_size > 20_000
+    # vector figures only, as asked; the estimate over time beside its truth
+    assert (tmp_path / "euclidean.svg").read_bytes()[:5] == b"<?xml"
+    assert (tmp_path / "euclidean.pdf").read_bytes()[:4] == b"%PDF"
+    assert not (tmp_path / "euclidean.png").exists()
+    estimate = np.load(tmp_path / "estimate.npz")
+    assert estimate["features"].shape[1:] == estimate["truth"].shape == (4, 3)
+    final = np.linalg.norm(estimate["features"][-1] - estimate["truth"], axis=-1)
+    np.testing.assert_allclose(final, summary["final_position_error_m"], rtol=1e-12)
+
+
+def test_one_option_vocabulary_and_version(capsys):
+    parser = build_parser()
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert (
+        done.value.code == 0 and capsys.readouterr().out.strip() == f"visjax {visjax.__version__}"
+    )
+    # the same options with the same meaning wherever they apply
+    for argv in (
+        ["velocity"], ["structure"], ["euclidean"], ["geometry"],
+        ["compare", "velocity"], ["sweep", "velocity"], ["tune", "velocity"],
+    ):  # fmt: skip
+        a = parser.parse_args([*argv, "--noise", "0.3", "--seed", "7", "--format", "pdf"])
+        assert (a.noise, a.seed, a.format, a.quiet, a.out) == (0.3, 7, ["pdf"], False, None)
+    for argv in (["velocity"], ["structure"], ["euclidean"], ["compare", "velocity"]):
+        assert parser.parse_args([*argv, "--data", "x.npz"]).data == "x.npz"
+    # the old name of euclidean's noise option still works
+    assert parser.parse_args(["euclidean", "--noise-px", "0.2"]).noise == 0.2
+    with pytest.raises(SystemExit):
+        main(["velocity", "--format", "png,jpeg"])
+    assert "png, pdf, svg" in capsys.readouterr().err
+    # --quick says what it changes
+    quick = next(
+        a for a in parser._subparsers._group_actions[0].choices["reproduce"]._actions
+        if a.dest == "quick"
+    )  # fmt: skip
+    assert "geometry scenes 100 -> 20" in quick.help and "velocity simulation runs in full" in (
+        quick.help
+    )
+    assert "seed 0" not in parser.format_help()
 
 
 def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch):

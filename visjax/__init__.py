@@ -2,7 +2,9 @@
 
 The library never changes JAX's global configuration. Enable float64 yourself
 (`jax.config.update("jax_enable_x64", True)`) for the papers' accuracy; the geometry also
-runs in float32. One exception, an XLA option set on import: see `_xla_workaround`.
+runs in float32. One exception: XLA options set on import (a scheduler option that avoids
+a deadlock of XLA's CPU runtime, and on jaxlib 0.10 the older loop emitter, which compiles
+faster): see `_xla_workaround`.
 
 Subpackages, from the bottom layer up: `geometry` (camera, SO(3), homography,
 decomposition, calibration, the uncalibrated-camera model), `kinematics` (rigid-body motion,
@@ -29,4 +31,4 @@ from . import (
 )
 from ._results import RESULTS as RESULTS
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"

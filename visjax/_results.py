@@ -37,7 +37,9 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
     no_physical_solution = (
         "No homography decomposition places the reference points in front of the camera."
     )
-    singular_jacobian = "The kinematics Jacobian J (seed 000, eq. (33)) is singular or not finite."
+    singular_jacobian = (
+        "The kinematics Jacobian J (Chitrakaran et al., eq. (33)) is singular or not finite."
+    )
     invalid_intrinsics = (
         "The intrinsic matrix (or another camera or plane parameter) is not finite, or the "
         "intrinsics are not invertible (a zero focal length)."

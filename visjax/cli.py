@@ -47,6 +47,19 @@ _points = _number(int, lambda v: v >= 4, "an integer of at least 4")
 _seed = _number(int, lambda v: v >= 0, "a non-negative integer")
 
 
+def _formats(text: str) -> list[str]:
+    """`--format png,pdf,svg`: figure formats, comma-separated."""
+    from .report import FORMATS
+
+    chosen = [f.strip().lower() for f in text.split(",") if f.strip()]
+    bad = [f for f in chosen if f not in FORMATS]
+    if not chosen or bad:
+        raise argparse.ArgumentTypeError(
+            f"expected figure formats among {', '.join(FORMATS)} (comma-separated), got {text!r}"
+        )
+    return list(dict.fromkeys(chosen))
+
+
 class _Parser(argparse.ArgumentParser):
     """Errors as one line, `visjax: error: ...`, exit status 2, no usage block."""
 
@@ -84,33 +97,43 @@ def _check_out_file(out) -> None:
 
 
 def _run_geometry(a):
-    return report.geometry_report(a.scenes, a.points, a.noise, a.seed, a.out)
+    return report.geometry_report(
+        a.scenes, a.points, a.noise, a.seed, a.out, formats=a.format, quiet=a.quiet
+    )
 
 
 def _run_velocity(a):
     if a.data is not None:
-        return report.velocity_data_report(a.data, out=a.out, quiet=a.quiet, filter_hz=a.filter_hz)
+        return report.velocity_data_report(
+            a.data, out=a.out, quiet=a.quiet, filter_hz=a.filter_hz, formats=a.format
+        )
     return report.velocity_report(
-        a.duration, a.rate, a.noise, a.seed, a.K, a.rho, out=a.out, quiet=a.quiet
-    )
+        a.duration, a.rate, a.noise, a.seed, a.K, a.rho, out=a.out, quiet=a.quiet,
+        formats=a.format,
+    )  # fmt: skip
 
 
 def _run_structure(a):
     if a.data is not None:
-        return report.structure_data_report(a.data, out=a.out, quiet=a.quiet)
-    return report.structure_report(a.set, a.duration, a.noise, a.seed, out=a.out, quiet=a.quiet)
+        return report.structure_data_report(a.data, out=a.out, quiet=a.quiet, formats=a.format)
+    return report.structure_report(
+        a.set, a.duration, a.noise, a.seed, out=a.out, quiet=a.quiet, formats=a.format
+    )
 
 
 def _run_euclidean(a):
     if a.data is not None:
-        return report.euclidean_data_report(a.data, out=a.out, quiet=a.quiet)
-    return report.euclidean_report(a.duration, a.noise_px, a.seed, out=a.out, quiet=a.quiet)
+        return report.euclidean_data_report(a.data, out=a.out, quiet=a.quiet, formats=a.format)
+    return report.euclidean_report(
+        a.duration, a.noise, a.seed, out=a.out, quiet=a.quiet, formats=a.format
+    )
 
 
 def _run_compare(a):
     return report.compare_report(
-        a.problem, a.data, a.noise, a.seeds, a.duration, out=a.out, quiet=a.quiet
-    )
+        a.problem, a.data, a.noise, a.seeds, a.duration, out=a.out, quiet=a.quiet, seed=a.seed,
+        formats=a.format,
+    )  # fmt: skip
 
 
 def _study_kwargs(a):
@@ -126,6 +149,8 @@ def _study_kwargs(a):
         shard=a.shard,
         out=a.out,
         quiet=a.quiet,
+        seed=a.seed,
+        formats=a.format,
     )
 
 
@@ -149,6 +174,33 @@ def _grid_spec(text: str) -> str:
     return text
 
 
+def _add_out(parser, what: str = "summary.json, the estimates and the figures") -> None:
+    parser.add_argument("--out", type=str, default=None, help=f"folder for {what}")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _add_format(parser) -> None:
+    parser.add_argument(
+        "--format",
+        type=_formats,
+        default=["png"],
+        help="figure formats, comma-separated: png, pdf, svg (default png)",
+    )
+
+
+def _add_noise(parser, default: float) -> None:
+    parser.add_argument(
+        "--noise",
+        type=_nonnegative,
+        default=default,
+        help=f"pixel noise sigma in px (default {default:g})",
+    )
+
+
+def _add_seed(parser, help: str = "the first noise seed (default 0)") -> None:
+    parser.add_argument("--seed", type=_seed, default=0, help=help)
+
+
 def _add_study_options(parser, seeds: int) -> None:
     parser.add_argument("problem", choices=("velocity", "structure", "euclidean"))
     parser.add_argument(
@@ -159,16 +211,15 @@ def _add_study_options(parser, seeds: int) -> None:
         "(low:high:count log-spaced, or values separated by /); default: the problem's "
         "(velocity: K, rho; structure: K, Y; euclidean: alpha, gamma)",
     )
-    parser.add_argument(
-        "--noise", type=_nonnegative, default=0.1, help="pixel noise sigma in px (default 0.1)"
-    )
+    _add_noise(parser, 0.1)
     parser.add_argument(
         "--seeds",
         type=_count,
         default=seeds,
-        help=f"training noise seeds (default {seeds}); as many held-out seeds measure the "
-        "reported metrics",
+        help=f"training noise seeds (default {seeds}); as many held-out seeds after them "
+        "measure the reported metrics",
     )
+    _add_seed(parser, "the first training seed (default 0)")
     _add_data(parser, "your own data file (.npz, velocity or euclidean; needs the truth)")
     parser.add_argument(
         "--duration", type=_positive, default=None, help="seconds (default: the problem's)"
@@ -186,8 +237,8 @@ def _add_study_options(parser, seeds: int) -> None:
         help="shard each chunk over every JAX device (GPUs; on CPUs one process per device "
         "with jax.distributed, see README)",
     )
-    parser.add_argument("--out", type=str, default=None, help="directory for the outputs")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_out(parser, "runs.parquet, runs.csv, summary.json and the figures")
+    _add_format(parser)
 
 
 def _run_track(a):
@@ -220,11 +271,12 @@ def _run_testbed(a):
         studies=not a.no_studies,
         out=a.out,
         quiet=a.quiet,
+        formats=a.format,
     )
 
 
 def _run_reproduce(a):
-    return report.reproduce(a.out, quick=a.quick, quiet=a.quiet)
+    return report.reproduce(a.out, quick=a.quick, quiet=a.quiet, formats=a.format)
 
 
 _OWN_DATA = (
@@ -236,30 +288,59 @@ def _add_data(parser, help: str) -> None:
     parser.add_argument("--data", type=str, default=None, help=help)
 
 
+def _quick_help() -> str:
+    from .report import QUICK
+
+    def show(v):
+        return "all" if v is None else ("/".join(v) if isinstance(v, list) else f"{v:g}")
+
+    changes = ", ".join(
+        f"{k.replace('_', ' ')} {show(full)} -> {show(quick)}"
+        for k, (full, quick) in QUICK.items()
+        if not isinstance(full, bool)
+    )
+    return (
+        f"shorter runs: {changes}, and the testbed without its studies (the camera matrix "
+        "of section 2.3, the v_py sensitivity); the velocity simulation runs in full. "
+        "results/ then differs from the README's tables, which are full runs"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="visjax", description="Vision-based nonlinear estimators in JAX.")
+    from . import __version__
+
+    parser = _Parser(
+        prog="visjax",
+        description="Vision-based nonlinear estimators in JAX: the velocity estimator of "
+        "Chitrakaran et al., the unknown input observer of Jang's thesis, and the adaptive "
+        "least-squares structure estimator of Nath et al.",
+    )
+    parser.add_argument("--version", action="version", version=f"visjax {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     g = sub.add_parser(
         "geometry",
-        help="homography estimation and decomposition: visjax vs OpenCV vs ground truth",
+        help="homography estimation and Euclidean decomposition (Chitrakaran et al., section "
+        "3): visjax vs OpenCV vs ground truth",
     )
     g.add_argument("--scenes", type=_count, default=100, help="random planar scenes (default 100)")
     g.add_argument("--points", type=_points, default=4, help="points per scene, >= 4 (default 4)")
-    g.add_argument("--noise", type=_nonnegative, default=0.0, help="pixel noise sigma (default 0)")
-    g.add_argument("--seed", type=_seed, default=0)
-    g.add_argument("--out", type=str, default=None, help="directory for summary.json and figure")
+    _add_noise(g, 0.0)
+    _add_seed(g, "the scenes' and the noise's seed (default 0)")
+    _add_out(g, "summary.json, scenes.parquet and the figure")
+    _add_format(g)
     g.set_defaults(func=_run_geometry)
 
     v = sub.add_parser(
         "velocity",
-        help="seed 000: the fixed-camera velocity estimator on the section-6 simulation",
+        help="the fixed-camera velocity estimator of Chitrakaran et al. on the paper's "
+        "section-6 simulation, or on your data",
     )
     v.add_argument("--duration", type=_positive, default=10.0, help="seconds (default 10)")
     v.add_argument(
         "--rate", type=_positive, default=1000.0, help="sample rate in Hz (default 1000)"
     )
-    v.add_argument("--noise", type=_nonnegative, default=0.0, help="pixel noise sigma (default 0)")
-    v.add_argument("--seed", type=_seed, default=0, help="noise seed")
+    _add_noise(v, 0.0)
+    _add_seed(v)
     v.add_argument(
         "--K", type=_six, default=_six(K_DEFAULT), help=f'diagonal of K (default "{K_DEFAULT}")'
     )
@@ -275,35 +356,37 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="with --data: a causal 2nd-order low-pass of the estimate at this bandwidth",
     )
-    v.add_argument("--out", type=str, default=None, help="directory for summary.json and figure")
-    v.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_out(v)
+    _add_format(v)
     _add_data(v, _OWN_DATA)
     v.set_defaults(func=_run_velocity)
 
     st = sub.add_parser(
         "structure",
-        help="seed 003: the unknown input observer on simulated analogues of the thesis' sets",
+        help="the unknown input observer of Jang's thesis on simulated analogues of its "
+        "seven experiment sets, or on your data",
     )
     st.add_argument("--set", action="append", help="I.1 ... II.3 (repeatable; default: all)")
     st.add_argument("--duration", type=_positive, default=30.0, help="seconds per set (default 30)")
-    st.add_argument(
-        "--noise", type=_nonnegative, default=0.1, help="pixel noise sigma in px (default 0.1)"
-    )
-    st.add_argument("--seed", type=_seed, default=0)
-    st.add_argument("--out", type=str, default=None, help="directory for figures and summary")
-    st.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_noise(st, 0.1)
+    _add_seed(st)
+    _add_out(st)
+    _add_format(st)
     _add_data(st, _OWN_DATA)
     st.set_defaults(func=_run_structure)
 
     eu = sub.add_parser(
         "euclidean",
-        help="seed 004: Euclidean positions from an uncalibrated moving camera (adaptive LS)",
+        help="Euclidean positions of static features from an uncalibrated moving camera "
+        "(Nath et al.'s adaptive least squares), on its simulation or on your data",
     )
-    eu.add_argument("--noise-px", type=_nonnegative, default=0.0, help="pixel noise (default 0)")
+    _add_noise(eu, 0.0)
+    # the option's name before version 0.3, kept so that old scripts run
+    eu.add_argument("--noise-px", dest="noise", type=_nonnegative, help=argparse.SUPPRESS)
     eu.add_argument("--duration", type=_positive, default=30.0, help="seconds (default 30)")
-    eu.add_argument("--seed", type=_seed, default=0)
-    eu.add_argument("--out", type=str, default=None, help="directory for figure and summary")
-    eu.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_seed(eu)
+    _add_out(eu)
+    _add_format(eu)
     _add_data(eu, _OWN_DATA)
     eu.set_defaults(func=_run_euclidean)
 
@@ -314,23 +397,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     c.add_argument("problem", choices=("velocity", "structure", "euclidean"))
     _add_data(c, "your own data file (.npz, see README 'Your own data'); noise is added on top")
-    c.add_argument(
-        "--noise", type=_nonnegative, default=0.1, help="pixel noise sigma in px (default 0.1)"
-    )
+    _add_noise(c, 0.1)
     c.add_argument("--seeds", type=_count, default=4, help="noise seeds (default 4)")
+    _add_seed(c)
     c.add_argument(
         "--duration",
         type=_positive,
         default=None,
         help="seconds of the paper's scenario (default: the problem's; not with --data)",
     )
-    c.add_argument("--out", type=str, default=None, help="directory for summary.json and figure")
-    c.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_out(c, "summary.json, records.parquet, records.csv and the figure")
+    _add_format(c)
     c.set_defaults(func=_run_compare)
 
     sw = sub.add_parser(
         "sweep",
-        help="a grid of gains over noise seeds, batched: runs.parquet, runs.csv, sweep.png, "
+        help="a grid of gains over noise seeds, batched: runs.parquet, runs.csv, the figure, "
         "summary.json (best and paper's gains on held-out seeds)",
     )
     _add_study_options(sw, seeds=8)
@@ -392,27 +474,22 @@ def build_parser() -> argparse.ArgumentParser:
         "default cm)",
     )
     tb.add_argument("--duration", type=_positive, default=30.0, help="seconds per set (default 30)")
-    tb.add_argument("--seed", type=_seed, default=0, help="the table texture's seed (default 0)")
+    _add_seed(tb, "the table texture's seed (default 0)")
     tb.add_argument("--no-video", action="store_true", help="no MP4 of the rendered frames")
     tb.add_argument(
         "--no-studies",
         action="store_true",
         help="skip the least-squares camera matrix (Tables 5-1/5-2) and the v_py sensitivity",
     )
-    tb.add_argument("--out", type=str, default=None, help="directory for tables, figures, videos")
-    tb.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_out(tb, "tables, estimates, figures and videos")
+    _add_format(tb)
     tb.set_defaults(func=_run_testbed)
 
     r = sub.add_parser("reproduce", help="every paper's main experiment, figures and a summary")
-    r.add_argument(
-        "--quick",
-        action="store_true",
-        help="shorter: 20 geometry scenes instead of 100, 20 s instead of 30 s for the thesis' "
-        "sets and the uncalibrated camera, and the testbed twin on sets I.1 and II.1 for 10 s "
-        "without its studies",
-    )
-    r.add_argument("--out", type=str, default="results", help="output directory (default results)")
+    r.add_argument("--quick", action="store_true", help=_quick_help())
+    r.add_argument("--out", type=str, default="results", help="output folder (default results)")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
+    _add_format(r)
     r.set_defaults(func=_run_reproduce)
     return parser
 

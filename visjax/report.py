@@ -1,13 +1,49 @@
 """The reproduction report: each paper's experiment as figures, `summary.json` and the
-printed tables, and `reproduce`, which runs them all. The command line calls these."""
+printed tables, and `reproduce`, which runs them all. The command line calls these.
 
+Every `summary.json` follows its schema in `visjax.io.SUMMARIES` (checked when it is
+written) and records the visjax version, the settings, the seed and the wall time;
+estimated trajectories go to NPZ files and tables to Parquet (`visjax.io.TABLES`,
+`visjax.io.ARRAYS`); figures are written in every format of `formats` (png, pdf, svg).
+"""
+
+import datetime
 import functools
-import json
 import math
 import time
 from pathlib import Path
 
 import numpy as np
+
+FORMATS = ("png", "pdf", "svg")
+
+
+def _summary(kind: str, body: dict, *, settings: dict, seed, started: float, out=None) -> dict:
+    """The summary of a command: `body` with the keys every summary has (`visjax.io.COMMON`),
+    checked against its schema, written to `out / "summary.json"` when `out` is given."""
+    import jax
+
+    from . import __version__
+    from .io import finite_or_null, validate_summary, write_summary
+
+    summary = {
+        "kind": kind,
+        "visjax_version": __version__,
+        "jax_version": jax.__version__,
+        "created_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+        "wall_time_s": time.perf_counter() - started,
+        "seed": seed,
+        "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in settings.items()},
+        **body,
+    }
+    if out is not None:
+        return write_summary(Path(out) / "summary.json", summary)
+    return validate_summary(finite_or_null(summary))
+
+
+def _files(path, formats) -> str:
+    """The figure files written for `path` in `formats`, for the printed file list."""
+    return ", ".join(str(Path(path).with_suffix("." + f)) for f in formats)
 
 
 def _enable_x64():
@@ -24,10 +60,20 @@ def _progress(total: int, desc: str, quiet: bool):
 
 
 def geometry_report(
-    scenes: int = 100, points: int = 4, noise: float = 0.0, seed: int = 0, out=None
+    scenes: int = 100,
+    points: int = 4,
+    noise: float = 0.0,
+    seed: int = 0,
+    out=None,
+    formats=("png",),
+    quiet: bool = False,
 ) -> dict:
     """Chitrakaran et al., section 3: random planar scenes reconstructed by visjax and by
-    OpenCV, both against ground truth (`summary.json`, `geometry.png`)."""
+    OpenCV, both against ground truth. Writes `summary.json` (kind `geometry`),
+    `scenes.parquet` (one row per scene and method, `visjax.io.TABLES`) and the figure
+    `geometry.<format>`."""
+    started = time.perf_counter()
+    settings = dict(scenes=scenes, points=points, noise=noise, seed=seed, formats=list(formats))
     _enable_x64()
     import jax
 
@@ -37,6 +83,8 @@ def geometry_report(
     from .plots import plot_geometry
     from .sim import random_planar_scenes
 
+    stages = _progress(3, "geometry", quiet)
+    stages.set_postfix_str("visjax, batched")
     sc = random_planar_scenes(scenes, points, seed=seed, noise_px=noise)
     rng = np.random.default_rng(seed + 1)
     # A rough prior of the plane normal (about 1 degree off) picks between the two physical
@@ -51,6 +99,8 @@ def geometry_report(
     rec = jax.block_until_ready(recon(sc.p_ref, sc.p_cur, sc.A, prior))
     t_visjax = time.perf_counter() - t0
     ours = {k: np.asarray(getattr(rec, k)) for k in ("R_bar", "x_h", "n_star", "alpha", "H")}
+    stages.update()
+    stages.set_postfix_str("OpenCV, per scene")
 
     t0 = time.perf_counter()
     cv = [
@@ -58,16 +108,16 @@ def geometry_report(
     ]
     t_cv = time.perf_counter() - t0
     theirs = {k: np.stack([c[k] for c in cv]) for k in cv[0]}
+    stages.update()
 
     errors = {
         "visjax": reconstruction_errors(ours, sc),
         "opencv": reconstruction_errors(theirs, sc),
     }
-    summary = {
+    body = {
         "scenes": scenes,
         "points": points,
         "noise_px": noise,
-        "seed": seed,
         "seconds": {"visjax_compile": t_compile, "visjax": t_visjax, "opencv": t_cv},
         "errors": {
             who: {
@@ -76,10 +126,27 @@ def geometry_report(
             for who, errs in errors.items()
         },
     }
+    if out is not None:
+        import pandas as pd
+
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        stages.set_postfix_str("figure")
+        pd.concat(
+            [
+                pd.DataFrame({"scene": np.arange(scenes), "method": who, **errs})
+                for who, errs in errors.items()
+            ],
+            ignore_index=True,
+        ).to_parquet(out / "scenes.parquet", index=False)
+        plot_geometry(sc, ours, errors, path=out / "geometry.png", formats=formats)
+    stages.update()
+    stages.close()
+    summary = _summary("geometry", body, settings=settings, seed=seed, started=started, out=out)
 
     print(
-        f"Euclidean reconstruction (seed 000, sec. 3): {scenes} random planar scenes, "
-        f"{points} points, pixel noise {noise} px"
+        "Euclidean reconstruction from a homography (Chitrakaran et al., section 3): "
+        f"{scenes} random planar scenes, {points} points, pixel noise {noise} px"
     )
     print(
         f"{'error vs ground truth':<22}{'visjax median':>15}{'visjax max':>13}"
@@ -88,17 +155,16 @@ def geometry_report(
     for k in errors["visjax"]:
         v, c = summary["errors"]["visjax"][k], summary["errors"]["opencv"][k]
         print(f"{k:<22}{v['median']:>15.3e}{v['max']:>13.3e}{c['median']:>15.3e}{c['max']:>13.3e}")
-    s = summary["seconds"]
+    t = summary["seconds"]
     print(
-        f"time: visjax {s['visjax'] * 1e3:.2f} ms batched (+{s['visjax_compile']:.1f} s compile), "
-        f"OpenCV {s['opencv'] * 1e3:.2f} ms loop"
+        f"time: visjax {t['visjax'] * 1e3:.2f} ms batched (+{t['visjax_compile']:.1f} s compile), "
+        f"OpenCV {t['opencv'] * 1e3:.2f} ms loop"
     )
     if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
-        plot_geometry(sc, ours, errors, path=out / "geometry.png")
-        print(f"wrote {out / 'summary.json'} and {out / 'geometry.png'}")
+        print(
+            f"wrote {out / 'summary.json'}, {out / 'scenes.parquet'}, "
+            f"{_files(out / 'geometry.png', formats)}"
+        )
     return summary
 
 
@@ -111,9 +177,13 @@ def velocity_report(
     rho=None,
     out=None,
     quiet: bool = False,
+    formats=("png",),
 ) -> dict:
-    """Chitrakaran et al., section 6: the velocity estimator on the paper's simulation
-    (`velocity.png` like Fig. 2, `summary.json`, the RMS table)."""
+    """Chitrakaran et al., section 6: the velocity estimator on the paper's simulation.
+    Writes `summary.json` (kind `velocity`: RMS and max error per DOF over the scoring
+    window), `estimate.npz` (`t`, `v_hat`, `velocity`) and `velocity.<format>` (like the
+    paper's Fig. 2), and prints the RMS table."""
+    started = time.perf_counter()
     _enable_x64()
     from .papers.chitrakaran import (
         DOF_NAMES,
@@ -126,40 +196,64 @@ def velocity_report(
 
     K = list(K_EQ63) if K is None else list(K)
     rho = list(RHO_EQ63) if rho is None else list(rho)
+    settings = dict(
+        duration=duration, rate=rate, noise=noise, seed=seed, K=K, rho=rho, formats=list(formats)
+    )
     stages = _progress(4, "velocity", quiet)
-    started = []
+    started_stages = []
 
     def progress(stage):
-        if started:
+        if started_stages:
             stages.update()
-        started.append(stage)
+        started_stages.append(stage)
         stages.set_postfix_str(stage)
 
     r = velocity_experiment(duration, rate, noise, K=K, rho=rho, seed=seed, progress=progress)
-    summary = summarise(r, duration, rate, noise)
-    summary["K"], summary["rho"] = K, rho
+    body = summarise(r, duration, rate, noise)
+    body["K"], body["rho"] = [float(k) for k in K], [float(x) for x in rho]
     progress("figure")
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        title = f"seed 000, section 6: {rate:g} Hz, {duration:g} s, pixel noise {noise:g} px"
-        plot_velocity(r.ts, r.velocity, r.estimate, title=title, path=out / "velocity.png")
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        np.savez(
+            out / "estimate.npz",
+            t=np.asarray(r.ts),
+            v_hat=np.asarray(r.estimate),
+            velocity=np.asarray(r.velocity),
+        )
+        title = (
+            f"velocity estimator (Chitrakaran et al.), section 6: {rate:g} Hz, {duration:g} s, "
+            f"pixel noise {noise:g} px"
+        )
+        plot_velocity(
+            r.ts, r.velocity, r.estimate, title=title, path=out / "velocity.png", formats=formats
+        )
     stages.update()
     stages.close()
+    summary = _summary(
+        "velocity",
+        body,
+        settings=settings,
+        seed=seed if noise > 0 else None,
+        started=started,
+        out=out,
+    )
 
     a, b = summary["window_s"]
     print(
-        f"Velocity estimator (seed 000, eqs. 39-40), section-6 simulation: {duration:g} s at "
-        f"{rate:g} Hz, pixel noise {noise:g} px"
+        "Velocity estimator (Chitrakaran et al., eqs. 39-40), section-6 simulation: "
+        f"{duration:g} s at {rate:g} Hz, pixel noise {noise:g} px"
     )
     print(f"recovered z1* = {summary['z1_star_recovered']:.6f} m")
     print(f"{'DOF':<6}{f'RMS {a:g}-{b:g} s':>16}{f'max {a:g}-{b:g} s':>16}")
-    for name, rms, mx in zip(DOF_NAMES, summary["rms_5_10s"], summary["max_5_10s"]):
+    for name, rms, mx in zip(DOF_NAMES, summary["rms_window"], summary["max_window"]):
         unit = "m/s" if name.startswith("v") else "rad/s"
         print(f"{name:<6}{rms:>16.5f}{mx:>16.5f}  {unit}")
     if out is not None:
-        print(f"wrote {out / 'summary.json'} and {out / 'velocity.png'}")
+        print(
+            f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
+            f"{_files(out / 'velocity.png', formats)}"
+        )
     return summary
 
 
@@ -183,16 +277,20 @@ def _last_half_rms(t, estimate, truth):
     ]
 
 
-def velocity_data_report(path, out=None, quiet: bool = False, filter_hz=None) -> dict:
+def velocity_data_report(
+    path, out=None, quiet: bool = False, filter_hz=None, formats=("png",)
+) -> dict:
     """The velocity estimator of Chitrakaran et al. on a user's data file
     (`visjax.io.VelocityData`): $n^*$ from the frames, $z_1^*$ from the known length, the
-    estimate in the camera and object frames (`estimate.npz`), `summary.json` with
-    `z1_star` and, when the file has the true `velocity`, `rms_last_half` (6 floats over
-    the second half of the run), and `velocity.png`."""
+    estimate in the camera and object frames (`estimate.npz`), `summary.json` (kind
+    `velocity_data`) with `z1_star` and, when the file has the true `velocity`,
+    `rms_last_half` (6 floats over the second half of the run), and `velocity.<format>`."""
+    started = time.perf_counter()
+    settings = dict(data=str(path), filter_hz=filter_hz, formats=list(formats))
     _enable_x64()
     import jax.numpy as jnp
 
-    from ._results import RESULTS
+    from ._results import RESULTS, result_names
     from .estimators import (
         SaveAt,
         VelocityEstimator,
@@ -229,10 +327,10 @@ def velocity_data_report(path, out=None, quiet: bool = False, filter_hz=None) ->
     ok = sol.result == RESULTS.successful
     ts = np.asarray(sol.ts)
     v_hat = np.asarray(sol.outputs.v_hat)
-    summary = {
+    body = {
         "z1_star": float(z1_star),
         "n_star": [float(x) for x in n_star],
-        "result": "successful" if ok else str(sol.result),
+        "result": "successful" if ok else result_names(sol.result),
         "order": list(DOF_NAMES),
         "samples": int(len(data.t)),
         "dropped_frames": int(np.sum(~np.asarray(stream.present))),
@@ -245,15 +343,15 @@ def velocity_data_report(path, out=None, quiet: bool = False, filter_hz=None) ->
         estimates["v_filtered"] = np.asarray(
             lowpass(jnp.asarray(ts), jnp.asarray(v_hat), filter_hz)
         )
-        summary["filter_hz"] = filter_hz
-        summary["filter_delay_s"] = lowpass_delay(filter_hz)
+        body["filter_hz"] = filter_hz
+        body["filter_delay_s"] = lowpass_delay(filter_hz)
     truth = None
     if data.velocity is not None:
         # the truth at the integration grid: the sample held at each grid time
         k = np.searchsorted(np.asarray(data.t), ts + 1e-9, side="right") - 1
         truth = np.asarray(data.velocity)[k]
         shown = estimates.get("v_filtered", v_hat)
-        summary["rms_last_half"], summary["window_s"] = _last_half_rms(ts, shown, truth)
+        body["rms_last_half"], body["window_s"] = _last_half_rms(ts, shown, truth)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -264,10 +362,13 @@ def velocity_data_report(path, out=None, quiet: bool = False, filter_hz=None) ->
             estimates.get("v_filtered", v_hat),
             title=f"velocity estimator (Chitrakaran et al.) on {Path(path).name}",
             path=out / "velocity.png",
+            formats=formats,
         )
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
     stages.update()
     stages.close()
+    summary = _summary(
+        "velocity_data", body, settings=settings, seed=None, started=started, out=out
+    )
     print(
         f"Velocity estimator (Chitrakaran et al., eqs. 39-40) on {path}: "
         f"{summary['samples']} frames"
@@ -280,7 +381,10 @@ def velocity_data_report(path, out=None, quiet: bool = False, filter_hz=None) ->
             + ", ".join(f"{n} {r:.4g}" for n, r in zip(DOF_NAMES, summary["rms_last_half"]))
         )
     if out is not None:
-        print(f"wrote {out / 'summary.json'}, {out / 'estimate.npz'} and {out / 'velocity.png'}")
+        print(
+            f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
+            f"{_files(out / 'velocity.png', formats)}"
+        )
     if not ok:
         raise RuntimeError(
             f"the estimator stopped: {sol.result} at sample {int(sol.failed_sample)}"
@@ -288,7 +392,7 @@ def velocity_data_report(path, out=None, quiet: bool = False, filter_hz=None) ->
     return summary
 
 
-def structure_data_report(path, out=None, quiet: bool = False) -> dict:
+def structure_data_report(path, out=None, quiet: bool = False, formats=("png",)) -> dict:
     """The unknown input observer of Jang's thesis (eq. (3.5)) on a user's data file
     (`visjax.io.StructureData`).
 
@@ -297,10 +401,12 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
     outside the design's model reported in `summary.json` as `unmodelled_motion`).
     Dropped frames (NaN pixels) are extrapolated from the last two seen. The observer
     runs at 1 kHz on the held frames. Writes `estimate.npz` (`t`, `position`, `x_hat`),
-    `summary.json` (with the truth, `rms_last_half`, 3 floats, m, at the frame times of
-    the second half) and `structure.png`."""
+    `summary.json` (kind `structure_data`; with the truth, `rms_last_half`, 3 floats, m, at
+    the frame times of the second half) and `structure.<format>`."""
+    started = time.perf_counter()
+    settings = dict(data=str(path), formats=list(formats))
     _enable_x64()
-    from ._results import RESULTS
+    from ._results import RESULTS, result_names
     from .estimators import SaveAt, moving_camera_stream, run
     from .io import StructureData
     from .plots import plot_structure
@@ -328,8 +434,8 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
     position = np.asarray(sol.outputs.position)[j]
     x_hat = np.asarray(sol.outputs.x_hat)[j]
     seen = np.all(np.isfinite(np.asarray(data.pixels)), axis=1)
-    summary = {
-        "result": "successful" if ok else str(sol.result),
+    body = {
+        "result": "successful" if ok else result_names(sol.result),
         "frames": int(len(t)),
         "dropped_frames": int(np.sum(~seen)),
         "integration_step_s": dt,
@@ -338,7 +444,7 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
     truth = None
     if data.position is not None:
         truth = np.asarray(data.position)
-        summary["rms_last_half"], summary["window_s"] = _last_half_rms(t, position, truth)
+        body["rms_last_half"], body["window_s"] = _last_half_rms(t, position, truth)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -349,10 +455,13 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
             position,
             title=f"unknown input observer (Jang's thesis) on {Path(path).name}",
             path=out / "structure.png",
+            formats=formats,
         )
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
     stages.update()
     stages.close()
+    summary = _summary(
+        "structure_data", body, settings=settings, seed=None, started=started, out=out
+    )
     print(
         f"Unknown input observer (Jang's thesis, eq. 3.5) on {path}: {len(t)} frames, "
         f"gains by design_uio_for_motion (rate {rate:.3g}/s); result: {summary['result']}"
@@ -364,7 +473,10 @@ def structure_data_report(path, out=None, quiet: bool = False) -> dict:
             + ", ".join(f"{n} {r:.4g}" for n, r in zip("XYZ", summary["rms_last_half"]))
         )
     if out is not None:
-        print(f"wrote {out / 'summary.json'}, {out / 'estimate.npz'} and {out / 'structure.png'}")
+        print(
+            f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
+            f"{_files(out / 'structure.png', formats)}"
+        )
     if not ok:
         raise RuntimeError(f"the observer stopped: {sol.result} at sample {int(sol.failed_sample)}")
     return summary
@@ -405,58 +517,107 @@ def structure_report(
     seed: int = 0,
     out=None,
     quiet: bool = False,
+    formats=("png",),
 ) -> dict:
-    """Jang's thesis: the UIO on the simulated analogues of the seven experiment sets
-    (figures like Figs. 5-7/5-8, `summary.json`, Tables 5-3 and 5-4 beside the thesis')."""
+    """Jang's thesis: the UIO on the simulated analogues of the seven experiment sets.
+    Writes `summary.json` (kind `structure`: per set the RMS position error beside the
+    thesis' Tables 5-3/5-4), `sets.parquet` (one row per set and axis), per set
+    `estimate_<set>.npz` (`t`, `position`, `estimate`), `structure_<set>.<format>` (like
+    Figs. 5-7/5-8) and `camera_velocity_<set>.<format>` (like Figs. 5-5/5-6), and prints the
+    tables."""
+    started = time.perf_counter()
+    names = _thesis_set_names(sets)
+    settings = dict(sets=names, duration=duration, noise=noise, seed=seed, formats=list(formats))
     _enable_x64()
     from tqdm import tqdm
 
     from .papers.jang import SETS, structure_experiment
-    from .plots import plot_structure
+    from .plots import plot_camera_velocity, plot_structure
 
-    names = _thesis_set_names(sets)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-    summary = {}
+    per_set = {}
     for name in tqdm(names, desc="structure", unit="set", disable=quiet):
         r = structure_experiment(name, duration, noise, seed=seed)
-        summary[name] = {
+        per_set[name] = {
             "rms": [float(x) for x in r.rms],
             "thesis_rms": list(SETS[name].thesis_rms),
         }
         if out is not None:
             kind = "moving" if SETS[name].moving else "static"
+            np.savez(
+                out / f"estimate_{name}.npz",
+                t=np.asarray(r.ts),
+                position=np.asarray(r.position),
+                estimate=np.asarray(r.estimate),
+            )
             plot_structure(
                 r.ts,
                 r.position,
                 r.estimate,
                 path=out / f"structure_{name}.png",
-                title=f"seed 003, set {name} ({kind} point), simulated: pixel noise "
-                f"{noise:g} px, camera 30 Hz, observer 1 kHz",
+                formats=formats,
+                title=f"unknown input observer (Jang's thesis), set {name} ({kind} point), "
+                f"simulated: pixel noise {noise:g} px, camera 30 Hz, observer 1 kHz",
             )
-    print(
-        f"UIO (seed 003, eq. 3.5), simulated analogues: {duration:g} s, pixel noise "
-        f"{noise:g} px, RMS position error over the second half (m)"
-    )
-    _print_thesis_tables(summary, names, "visjax")
+            plot_camera_velocity(
+                r.frame_ts,
+                r.camera_velocity,
+                path=out / f"camera_velocity_{name}.png",
+                formats=formats,
+                title=f"Jang's thesis, set {name}: camera velocity (simulated analogue)",
+            )
+    body = {"duration_s": duration, "noise_px": noise, "sets": per_set}
     if out is not None:
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
-        print(f"\nwrote {out / 'summary.json'} and structure_<set>.png")
+        import pandas as pd
+
+        pd.DataFrame(
+            [
+                {
+                    "set": name,
+                    "axis": axis,
+                    "rms_m": per_set[name]["rms"][i],
+                    "thesis_rms_m": per_set[name]["thesis_rms"][i],
+                }
+                for name in names
+                for i, axis in enumerate("xyz")
+            ]
+        ).to_parquet(out / "sets.parquet", index=False)
+    summary = _summary(
+        "structure",
+        body,
+        settings=settings,
+        seed=seed if noise > 0 else None,
+        started=started,
+        out=out,
+    )
+    print(
+        f"Unknown input observer (Jang's thesis, eq. 3.5), simulated analogues: "
+        f"{duration:g} s, pixel noise {noise:g} px, RMS position error over the second half (m)"
+    )
+    _print_thesis_tables(per_set, names, "visjax")
+    if out is not None:
+        print(
+            f"\nwrote {out / 'summary.json'}, sets.parquet, estimate_<set>.npz, "
+            f"structure_<set> and camera_velocity_<set> ({', '.join(formats)})"
+        )
     return summary
 
 
-def euclidean_data_report(path, out=None, quiet: bool = False) -> dict:
+def euclidean_data_report(path, out=None, quiet: bool = False, formats=("png",)) -> dict:
     """The adaptive structure estimator of Nath et al. on a user's data file
     (`visjax.io.EuclideanData`): built from the nominal camera of the file
     (`AdaptiveStructureEstimator.from_nominal`: initial guesses and gains from the scene's
     scale, never from a truth), run at 1 kHz on the held samples (at the samples if they
     are faster), features out of view (NaN) masked in both laws. Writes `estimate.npz`
     (`t`, `features` (M, n - k, 3), the recovered camera `A`, `R_c`, `x_c` over time),
-    `summary.json` (the final features and camera; with the truth,
-    `final_position_error_m`, n - k floats) and `euclidean.png`."""
+    `summary.json` (kind `euclidean_data`: the final features and camera; with the truth,
+    `final_position_error_m`, n - k floats) and `euclidean.<format>`."""
+    started = time.perf_counter()
+    settings = dict(data=str(path), formats=list(formats))
     _enable_x64()
-    from ._results import RESULTS
+    from ._results import RESULTS, result_names
     from .estimators import AdaptiveStructureEstimator, SaveAt, platform_stream, run
     from .io import EuclideanData
     from .plots import plot_feature_estimates
@@ -481,8 +642,8 @@ def euclidean_data_report(path, out=None, quiet: bool = False) -> dict:
     ok = bool(sol.result == RESULTS.successful)
     features = np.asarray(sol.outputs.omega_s)
     A, R_c, x_c = (np.asarray(getattr(sol.outputs, f)) for f in ("A", "R_c", "x_c"))
-    summary = {
-        "result": "successful" if ok else str(sol.result),
+    body = {
+        "result": "successful" if ok else result_names(sol.result),
         "frames": int(pixels.shape[0]),
         "known_features": k,
         "unknown_features": int(pixels.shape[1] - k),
@@ -493,7 +654,7 @@ def euclidean_data_report(path, out=None, quiet: bool = False) -> dict:
     }
     if data.features is not None:
         err = np.linalg.norm(features[-1] - np.asarray(data.features), axis=-1)
-        summary["final_position_error_m"] = [float(e) for e in err]
+        body["final_position_error_m"] = [float(e) for e in err]
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
@@ -506,10 +667,13 @@ def euclidean_data_report(path, out=None, quiet: bool = False) -> dict:
             data.features,
             title=f"adaptive structure estimator (Nath et al.) on {Path(path).name}",
             path=out / "euclidean.png",
+            formats=formats,
         )
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
     stages.update()
     stages.close()
+    summary = _summary(
+        "euclidean_data", body, settings=settings, seed=None, started=started, out=out
+    )
     print(
         f"Adaptive LS structure estimator (Nath et al., eqs. 37-51) on {path}: "
         f"{summary['frames']} frames, {k} known and {summary['unknown_features']} unknown "
@@ -518,7 +682,10 @@ def euclidean_data_report(path, out=None, quiet: bool = False) -> dict:
     for i, e in enumerate(summary.get("final_position_error_m", [])):
         print(f"feature {k + i + 1}: final position error {e * 1000:8.3f} mm")
     if out is not None:
-        print(f"wrote {out / 'summary.json'}, {out / 'estimate.npz'} and {out / 'euclidean.png'}")
+        print(
+            f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
+            f"{_files(out / 'euclidean.png', formats)}"
+        )
     if not ok:
         raise RuntimeError(
             f"the estimator stopped: {sol.result} at sample {int(sol.failed_sample)}"
@@ -527,23 +694,31 @@ def euclidean_data_report(path, out=None, quiet: bool = False) -> dict:
 
 
 def euclidean_report(
-    duration: float = 30.0, noise_px: float = 0.0, seed: int = 0, out=None, quiet: bool = False
+    duration: float = 30.0,
+    noise: float = 0.0,
+    seed: int = 0,
+    out=None,
+    quiet: bool = False,
+    formats=("png",),
 ) -> dict:
-    """Nath et al.: the adaptive least-squares structure estimator on its simulation
-    (`euclidean.png`, `summary.json`, the final errors)."""
+    """Nath et al.: the adaptive least-squares structure estimator on its simulation.
+    Writes `summary.json` (kind `euclidean`: the final position errors), `estimate.npz`
+    (`t`, `features` over time, `truth`) and `euclidean.<format>`."""
+    started = time.perf_counter()
+    settings = dict(duration=duration, noise=noise, seed=seed, formats=list(formats))
     _enable_x64()
     from .papers.nath import euclidean_experiment, final_errors
     from .plots import plot_euclidean
 
     stages = _progress(2, "euclidean", quiet)
     stages.set_postfix_str("simulate and estimate (compiles once)")
-    r = euclidean_experiment(duration, noise_px, seed=seed)
+    r = euclidean_experiment(duration, noise, seed=seed)
     stages.update()
     errors = final_errors(r)
-    summary = {
+    body = {
         "final_position_error_m": [float(e) for e in errors],
         "duration_s": duration,
-        "noise_px": noise_px,
+        "noise_px": noise,
         "final_camera_prediction_error_px": float(np.asarray(r.p_tilde_c[-1]).max()),
         "covariance_resets": int(r.resets[-1]),
     }
@@ -551,18 +726,32 @@ def euclidean_report(
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
+        np.savez(
+            out / "estimate.npz",
+            t=np.asarray(r.ts),
+            features=np.asarray(r.omega_s),
+            truth=np.asarray(r.omega_true),
+        )
         plot_euclidean(
             r,
             path=out / "euclidean.png",
-            title=f"seed 004: adaptive LS structure, {duration:g} s at 1 kHz, "
-            f"pixel noise {noise_px:g} px",
+            formats=formats,
+            title=f"adaptive least-squares structure estimator (Nath et al.): {duration:g} s "
+            f"at 1 kHz, pixel noise {noise:g} px",
         )
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
     stages.update()
     stages.close()
+    summary = _summary(
+        "euclidean",
+        body,
+        settings=settings,
+        seed=seed if noise > 0 else None,
+        started=started,
+        out=out,
+    )
     print(
-        f"Adaptive LS structure estimator (seed 004, eqs. 37-51): {duration:g} s at 1 kHz, "
-        f"pixel noise {noise_px:g} px, uncalibrated camera"
+        "Adaptive least-squares structure estimator (Nath et al., eqs. 37-51): "
+        f"{duration:g} s at 1 kHz, pixel noise {noise:g} px, uncalibrated camera"
     )
     for i, e in enumerate(errors):
         print(f"feature {i + 1}: final position error {e * 1000:8.3f} mm")
@@ -571,7 +760,10 @@ def euclidean_report(
         f"covariance resets {summary['covariance_resets']}"
     )
     if out is not None:
-        print(f"wrote {out / 'summary.json'} and {out / 'euclidean.png'}")
+        print(
+            f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
+            f"{_files(out / 'euclidean.png', formats)}"
+        )
     return summary
 
 
@@ -583,12 +775,26 @@ def compare_report(
     duration: float | None = None,
     out=None,
     quiet: bool = False,
+    seed: int = 0,
+    formats=("png",),
 ) -> dict:
     """`visjax compare`: the paper's estimator, its batch baselines (all frames and a
-    sliding window) and its EKF on identical noisy inputs (`visjax.studies.compare`), from
-    the paper's scenario or a data file (noise added on top of its pixels). Writes
-    `summary.json` (`{"records": [...], "settings": {...}}`, one record per method and
-    seed), `records.csv` and `comparison.png`, and prints the medians per method."""
+    sliding window) and its EKF on identical noisy inputs (`visjax.studies.compare`, noise
+    seeds `seed, ..., seed + seeds - 1`), from the paper's scenario or a data file (noise
+    added on top of its pixels). Writes `summary.json` (kind `compare`: `records`, one per
+    method and seed, and `problem_settings`), `records.parquet`, `records.csv` and
+    `comparison.<format>` (accuracy and latency with their spread over seeds), and prints
+    the medians per method."""
+    started = time.perf_counter()
+    settings = dict(
+        problem=problem,
+        data=None if data is None else str(data),
+        noise=noise,
+        seeds=seeds,
+        seed=seed,
+        duration=duration,
+        formats=list(formats),
+    )
     _enable_x64()
     from . import studies
 
@@ -606,15 +812,16 @@ def compare_report(
         setup.inputs,
         setup.score,
         seeds=seeds,
+        first_seed=seed,
         updates=setup.updates,
         progress=not quiet,
     )
-    summary = {
+    body = {
         "problem": problem,
         "data": None if data is None else str(data),
         "noise_px": noise,
         "seeds": seeds,
-        "settings": setup.settings,
+        "problem_settings": setup.settings,
         "records": records,
     }
     print(
@@ -636,16 +843,23 @@ def compare_report(
 
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "summary.json").write_text(json.dumps(summary, indent=2))
-        pd.DataFrame(records).to_csv(out / "records.csv", index=False)
+        table = pd.DataFrame(records)
+        table.to_parquet(out / "records.parquet", index=False)
+        table.to_csv(out / "records.csv", index=False)
         plot_comparison(
             records,
             setup.accuracy,
             label=setup.label,
             title=f"{setup.name}, {noise:g} px",
             path=out / "comparison.png",
+            formats=formats,
         )
-        print(f"wrote {out / 'summary.json'}, {out / 'records.csv'} and {out / 'comparison.png'}")
+    summary = _summary("compare", body, settings=settings, seed=seed, started=started, out=out)
+    if out is not None:
+        print(
+            f"wrote {out / 'summary.json'}, {out / 'records.parquet'}, {out / 'records.csv'}, "
+            f"{_files(out / 'comparison.png', formats)}"
+        )
     return summary
 
 
@@ -688,10 +902,11 @@ def _tuning_setup(problem, noise, data, stamp, duration, rate, set_name):
     return make(noise_px=noise, data=data, **kwargs)
 
 
-def _held_out(setup, points: dict, seeds: int, chunk: int, mesh):
+def _held_out(setup, points: dict, seeds: int, chunk: int, mesh, first: int = 0):
     """The metric of each named parameter point on the held-out noise seeds
-    `seeds, ..., 2 seeds - 1` (never seen by the sweep or the tuning): `{name: {"params",
-    "metric", "failed"}}` (`metric` the mean over the successful seeds)."""
+    `first + seeds, ..., first + 2 seeds - 1` (never seen by the sweep or the tuning, which
+    use `first, ..., first + seeds - 1`): `{name: {"params", "metric", "failed"}}`
+    (`metric` the mean over the successful seeds)."""
     import jax.numpy as jnp
 
     from . import studies
@@ -701,7 +916,7 @@ def _held_out(setup, points: dict, seeds: int, chunk: int, mesh):
     table = studies.sweep(
         setup.factory,
         params,
-        jnp.arange(seeds, 2 * seeds),
+        jnp.arange(first + seeds, first + 2 * seeds),
         metrics=setup.metrics,
         chunk=chunk,
         mesh=mesh,
@@ -727,19 +942,13 @@ def _mesh(shard: bool):
     return Mesh(np.array(jax.devices()), ("runs",))
 
 
-def _finite_or_null(obj):
-    """NaN and inf as JSON null (strict JSON; pandas and every parser load it)."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite_or_null(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite_or_null(v) for v in obj]
-    return obj
-
-
 def _write_json(path, obj):
-    path.write_text(json.dumps(_finite_or_null(obj), indent=2, allow_nan=False))
+    """Strict JSON (NaN and inf as null), for files that are not summaries."""
+    import json
+
+    from .io import finite_or_null
+
+    path.write_text(json.dumps(finite_or_null(obj), indent=2, allow_nan=False))
 
 
 def _structure_lmi(setup, params) -> dict:
@@ -762,8 +971,9 @@ def _structure_lmi(setup, params) -> dict:
     }
 
 
-def _one_sweep(setup, grid, seeds, chunk, mesh, quiet):
-    """Sweep one problem on the training seeds; returns (table, summary, best)."""
+def _one_sweep(setup, grid, seeds, chunk, mesh, quiet, first: int = 0):
+    """Sweep one problem on the training seeds `first, ..., first + seeds - 1`; returns
+    (table, summary, best)."""
     import jax.numpy as jnp
 
     from . import studies
@@ -772,7 +982,7 @@ def _one_sweep(setup, grid, seeds, chunk, mesh, quiet):
     table = studies.sweep(
         setup.factory,
         params,
-        jnp.arange(seeds),
+        jnp.arange(first, first + seeds),
         metrics=setup.metrics,
         chunk=chunk,
         mesh=mesh,
@@ -781,6 +991,29 @@ def _one_sweep(setup, grid, seeds, chunk, mesh, quiet):
     summary = studies.summarise(table, setup.metric)
     best = studies.best(table, setup.metric)
     return table, summary, best
+
+
+def _study_settings(arguments: dict) -> dict:
+    """The settings of a sweep or tune command from its arguments."""
+    settings = {k: v for k, v in arguments.items() if k not in ("started",)}
+    settings["data"] = None if settings.get("data") is None else str(settings["data"])
+    settings["sets"] = None if settings.get("sets") is None else list(settings["sets"])
+    settings["formats"] = list(settings["formats"])
+    return settings
+
+
+def _study_result(problem, results, settings, seed, started, out):
+    """A sweep's or tune's result: the one summary, or for the structure problem the
+    summaries by thesis set (written as a `sets` summary at the top of `out`)."""
+    if problem == "structure":
+        summary = _summary(
+            "sets", {"sets": results}, settings=settings, seed=seed, started=started, out=out
+        )
+    else:
+        summary = results[None]
+    if out is not None:
+        print(f"wrote {out}")
+    return summary
 
 
 def _print_result(tag, setup, held, extra=""):
@@ -806,13 +1039,18 @@ def sweep_report(
     shard: bool = False,
     out=None,
     quiet: bool = False,
+    seed: int = 0,
+    formats=("png",),
 ) -> dict:
     """`visjax sweep`: a grid of gain multipliers (`--grid`, default the problem's) over
-    `seeds` noise seeds (`studies.sweep`), the best point by the mean metric, and the best
-    point and the paper's gains re-measured on `seeds` held-out seeds. Writes `runs.parquet`,
-    `runs.csv`, `sweep.png` and `summary.json` (`{"metric", "best": {"params", "metric"},
-    "paper": {"params", "metric"}, ...}`, the metrics held-out); for the structure problem
-    one folder per thesis set and a top-level `summary.json` of them by set."""
+    `seeds` noise seeds from `seed` (`studies.sweep`), the best point by the mean metric,
+    and the best point and the paper's gains re-measured on `seeds` held-out seeds. Writes
+    `runs.parquet`, `runs.csv`, `sweep.<format>` and `summary.json` (kind `sweep`:
+    `{"metric", "best": {"params", "metric"}, "paper": {"params", "metric"}, ...}`, the
+    metrics held-out); for the structure problem one folder per thesis set and a top-level
+    `summary.json` (kind `sets`) of them by set."""
+    started = time.perf_counter()
+    settings = _study_settings(locals())
     _enable_x64()
     from . import studies
     from .plots import plot_sweep
@@ -820,8 +1058,10 @@ def sweep_report(
     results = {}
     mesh = _mesh(shard)
     for tag, setup in _tuning_setups(problem, data, noise, duration, rate, sets):
-        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet)
-        held = _held_out(setup, {"best": best["params"], "paper": setup.paper}, seeds, chunk, mesh)
+        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet, seed)
+        held = _held_out(
+            setup, {"best": best["params"], "paper": setup.paper}, seeds, chunk, mesh, seed
+        )
         result = {
             "metric": setup.metric,
             "best": {"params": held["best"]["params"], "metric": held["best"]["metric"]},
@@ -830,24 +1070,23 @@ def sweep_report(
             "grid": grid or setup.grid,
             "noise_px": noise,
             "seeds": seeds,
-            "held_out_seeds": [seeds, 2 * seeds - 1],
+            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
             "best_training_metric": best["metric"],
             "best_gains": setup.gains(best["params"]),
             "paper_gains": setup.gains(setup.paper),
             "failed_runs": int((table["result"] != "successful").sum()),
             "runs": len(table),
-            "settings": setup.settings,
+            "problem_settings": setup.settings,
         }
         if problem == "structure":
             result["lmi"] = _structure_lmi(setup, best["params"])
         _print_result(
             tag, setup, held, f"{result['failed_runs']} of {len(table)} sweep runs failed"
         )
-        results[tag] = result
+        folder = None
         if out is not None:
             folder = Path(out) if tag is None else Path(out) / tag.replace(".", "_")
             studies.save_table(table, folder)
-            _write_json(folder / "summary.json", result)
             plot_sweep(
                 summary,
                 setup.metric,
@@ -857,12 +1096,12 @@ def sweep_report(
                 label=setup.label,
                 title=setup.name,
                 path=folder / "sweep.png",
+                formats=formats,
             )
-    if out is not None and problem == "structure":
-        _write_json(Path(out) / "summary.json", results)
-    if out is not None:
-        print(f"wrote {out}")
-    return results if problem == "structure" else results[None]
+        results[tag] = _summary(
+            "sweep", result, settings=settings, seed=seed, started=started, out=folder
+        )
+    return _study_result(problem, results, settings, seed, started, out)
 
 
 def tune_report(
@@ -880,6 +1119,8 @@ def tune_report(
     shard: bool = False,
     out=None,
     quiet: bool = False,
+    seed: int = 0,
+    formats=("png",),
 ) -> dict:
     """`visjax tune`: a sweep of the grid (`--grid`, default the problem's) on `seeds`
     training seeds, then `studies.tune` (Adam on the log gains, forward-mode gradients
@@ -887,9 +1128,12 @@ def tune_report(
     tuned gains, the sweep's best and the paper's gains re-measured on `seeds` held-out
     seeds. Writes `runs.parquet`, `runs.csv` (the sweep), `history.csv`, `sweep.png`,
     `tune.png` and `summary.json` (`{"metric", "best": {"params", "metric"}, "paper":
-    {"params", "metric"}, ...}`: `best` is the tuned point, metrics held-out); for the
+    {"params", "metric"}, ...}`, kind `tune`: `best` is the tuned point, metrics held-out);
+    training seeds `seed, ..., seed + seeds - 1`, held-out seeds the next `seeds`; for the
     structure problem one folder per thesis set (with the LMI check of the tuned gains)
-    and a top-level `summary.json` of them by set."""
+    and a top-level `summary.json` (kind `sets`) of them by set."""
+    started = time.perf_counter()
+    settings = _study_settings(locals())
     _enable_x64()
     import jax.numpy as jnp
     import optax
@@ -901,12 +1145,12 @@ def tune_report(
     results = {}
     mesh = _mesh(shard)
     for tag, setup in _tuning_setups(problem, data, noise, duration, rate, sets):
-        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet)
+        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet, seed)
         tuned = studies.tune(
             setup.factory,
             best["params"],
             setup.loss,
-            jnp.arange(seeds),
+            jnp.arange(seed, seed + seeds),
             optimiser=optax.adam(learning_rate),
             steps=steps,
             progress=not quiet,
@@ -917,6 +1161,7 @@ def tune_report(
             seeds,
             chunk,
             mesh,
+            seed,
         )
         result = {
             "metric": setup.metric,
@@ -931,14 +1176,14 @@ def tune_report(
             "grid": grid or setup.grid,
             "noise_px": noise,
             "seeds": seeds,
-            "held_out_seeds": [seeds, 2 * seeds - 1],
+            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
             "steps": steps,
             "optimiser": f"optax.adam({learning_rate}) on the log gains, forward mode",
             "training_loss": {"sweep_best": tuned.loss0, "tuned": tuned.loss},
             "tuned_gains": setup.gains(tuned.params),
             "paper_gains": setup.gains(setup.paper),
             "held_out_failed_runs": {k: v["failed"] for k, v in held.items()},
-            "settings": setup.settings,
+            "problem_settings": setup.settings,
         }
         extra = (
             f"held-out improvement over the paper's gains: x {result['improvement_over_paper']:.3g}"
@@ -952,12 +1197,11 @@ def tune_report(
                 f"{result['lmi']['published_certified_lipschitz']:.3g})"
             )
         _print_result(tag, setup, held, extra)
-        results[tag] = result
+        folder = None
         if out is not None:
             folder = Path(out) if tag is None else Path(out) / tag.replace(".", "_")
             studies.save_table(table, folder)
             pd.DataFrame(tuned.history).to_csv(folder / "history.csv", index=False)
-            _write_json(folder / "summary.json", result)
             plot_sweep(
                 summary,
                 setup.metric,
@@ -967,18 +1211,19 @@ def tune_report(
                 label=setup.label,
                 title=setup.name,
                 path=folder / "sweep.png",
+                formats=formats,
             )
             plot_tune_history(
                 tuned.history,
-                label=f"training {setup.metric}",
+                label=f"training {setup.label}",
                 title=setup.name,
                 path=folder / "tune.png",
+                formats=formats,
             )
-    if out is not None and problem == "structure":
-        _write_json(Path(out) / "summary.json", results)
-    if out is not None:
-        print(f"wrote {out}")
-    return results if problem == "structure" else results[None]
+        results[tag] = _summary(
+            "tune", result, settings=settings, seed=seed, started=started, out=folder
+        )
+    return _study_result(problem, results, settings, seed, started, out)
 
 
 def track_report(
@@ -1124,6 +1369,7 @@ def testbed_report(
     studies: bool = True,
     out=None,
     quiet: bool = False,
+    formats=("png",),
 ) -> dict:
     """Jang's thesis, chapters 4-5, on the testbed twin (`visjax.papers.jang.testbed`): each
     set end to end, Tables 5-3/5-4 beside the thesis', figures like Figs. 5-5 to 5-8, an MP4
@@ -1131,18 +1377,28 @@ def testbed_report(
     section 2.3 from set I.1's data with Tables 5-1/5-2 redone, and the sensitivity of the
     moving sets to the amplitude of $v_{py}$.
 
-    Writes `summary.json` (per set: `rms`, `thesis_rms`, `tracking_rms_px`, `units`, and the
-    scoring), `tables.csv` (Tables 5-3/5-4, one row per set and axis), `testbed_<set>.png`,
-    `testbed_<set>.mp4`, `testbed_<set>.npz`, and with `studies` `calibration.json` and
-    `sensitivity.csv`.
+    Writes `summary.json` (kind `testbed`; per set: `rms`, `thesis_rms`, `tracking_rms_px`,
+    and the scoring), `tables.parquet` and `tables.csv` (Tables 5-3/5-4, one row per set
+    and axis), `testbed_<set>.<format>`, `testbed_<set>.mp4`, `testbed_<set>.npz`, and with
+    `studies` `calibration.json`, `sensitivity.parquet` and `sensitivity.csv`.
     """
+    started = time.perf_counter()
+    names = _thesis_set_names(sets)
+    settings = dict(
+        sets=names,
+        units=units,
+        duration=duration,
+        seed=seed,
+        video=video,
+        studies=studies,
+        formats=list(formats),
+    )
     _enable_x64()
     from tqdm import tqdm
 
     from .papers.jang import KC_REFINED, SETS, UNITS, testbed
     from .plots import plot_testbed
 
-    names = _thesis_set_names(sets)
     if units not in UNITS:
         raise ValueError(f"`units` must be one of {list(UNITS)}; got {units!r}")
     if out is not None:
@@ -1160,6 +1416,7 @@ def testbed_report(
                 plot_testbed(
                     r,
                     path=out / f"testbed_{name}.png",
+                    formats=formats,
                     title=f"Jang's thesis, set {name} ({kind} point) on the testbed twin: A "
                     f"read in {units}/s, camera 30 Hz, observer 1 kHz",
                 )
@@ -1198,7 +1455,6 @@ def testbed_report(
     if studies:
         _testbed_studies(runs, names, units, duration, seed, out, quiet)
     if out is not None:
-        _write_json(out / "summary.json", summary)
         import pandas as pd
 
         rows = []
@@ -1220,8 +1476,16 @@ def testbed_report(
                         "feasible": e["feasible"],
                     }
                 )
-        pd.DataFrame(rows).to_csv(out / "tables.csv", index=False)
-        print(f"\nwrote {out / 'summary.json'}, tables.csv, testbed_<set>.png/.mp4/.npz")
+        table = pd.DataFrame(rows)
+        table.to_parquet(out / "tables.parquet", index=False)
+        table.to_csv(out / "tables.csv", index=False)
+    body = {"units": units, "duration_s": duration, "sets": summary}
+    summary = _summary("testbed", body, settings=settings, seed=seed, started=started, out=out)
+    if out is not None:
+        print(
+            f"\nwrote {out / 'summary.json'}, tables.parquet/.csv, testbed_<set>.npz/.mp4 and "
+            f"testbed_<set> ({', '.join(formats)})"
+        )
     if not quiet:
         print(f"({time.time() - t_start:.0f} s)")
     return summary
@@ -1319,71 +1583,128 @@ def _testbed_studies(runs, names, units, duration, seed, out, quiet) -> dict:
         print(f"\nsensitivity to v_py (amplitude in {units}/s; exact pixels), RMS (m):")
         print(table.to_string(index=False, float_format=lambda x: f"{x:.4f}"))
         if out is not None:
+            table.to_parquet(out / "sensitivity.parquet", index=False)
             table.to_csv(out / "sensitivity.csv", index=False)
     return result
 
 
-def reproduce(out="results", quick: bool = False, quiet: bool = False) -> dict:
-    """Every paper's main experiment into one folder, then a summary table."""
+QUICK = {
+    "geometry_scenes": (100, 20),
+    "structure_duration_s": (30.0, 20.0),
+    "euclidean_duration_s": (30.0, 20.0),
+    "testbed_sets": (None, ["I.1", "II.1"]),
+    "testbed_duration_s": (30.0, 10.0),
+    "testbed_studies": (True, False),
+}
+"""What `reproduce --quick` changes: (full, quick) per setting. The velocity simulation
+(10 s at 1 kHz) runs in full either way."""
+
+
+def reproduce(out="results", quick: bool = False, quiet: bool = False, formats=("png",)) -> dict:
+    """Every paper's main experiment into one folder, then a summary table (`summary.json`,
+    kind `reproduce`, and `summary.parquet`: one row per figure, its value as a number,
+    its unit and the paper's reference). `quick` shortens the runs as `QUICK` says."""
+    started = time.perf_counter()
+    q = {k: v[1] if quick else v[0] for k, v in QUICK.items()}
+    settings = dict(out=str(out), quick=quick, formats=list(formats), **q)
     out = Path(out)
     results = {}
-    print("== seed 000, section 6: velocity estimator ==")
-    results["velocity"] = velocity_report(out=out / "velocity", quiet=quiet)
-    print("\n== seed 000, section 3: Euclidean reconstruction vs OpenCV ==")
-    results["geometry"] = geometry_report(scenes=20 if quick else 100, out=out / "geometry")
-    print("\n== seed 003: unknown input observer, the thesis' seven sets (simulated) ==")
-    results["structure"] = structure_report(
-        duration=20.0 if quick else 30.0, noise=0.1, out=out / "structure", quiet=quiet
+    print("== Chitrakaran et al., section 6: the velocity estimator ==")
+    results["velocity"] = velocity_report(out=out / "velocity", quiet=quiet, formats=formats)
+    print("\n== Chitrakaran et al., section 3: Euclidean reconstruction vs OpenCV ==")
+    results["geometry"] = geometry_report(
+        scenes=q["geometry_scenes"], out=out / "geometry", quiet=quiet, formats=formats
     )
-    print("\n== seed 004: Euclidean structure from an uncalibrated moving camera ==")
+    print("\n== Jang's thesis: the unknown input observer on the seven sets (simulated) ==")
+    results["structure"] = structure_report(
+        duration=q["structure_duration_s"],
+        noise=0.1,
+        out=out / "structure",
+        quiet=quiet,
+        formats=formats,
+    )
+    print("\n== Nath et al.: Euclidean structure from an uncalibrated moving camera ==")
     results["euclidean"] = euclidean_report(
-        duration=20.0 if quick else 30.0, out=out / "euclidean", quiet=quiet
+        duration=q["euclidean_duration_s"], out=out / "euclidean", quiet=quiet, formats=formats
     )
     print("\n== Jang's thesis, chapters 4-5: the testbed twin (PUMA 560, rendered video, KLT) ==")
     results["testbed"] = testbed_report(
-        ["I.1", "II.1"] if quick else None,
+        q["testbed_sets"],
         "cm",
-        10.0 if quick else 30.0,
-        studies=not quick,
+        q["testbed_duration_s"],
+        studies=q["testbed_studies"],
         out=out / "testbed",
         quiet=quiet,
+        formats=formats,
     )
     v, g = results["velocity"], results["geometry"]["errors"]
+    a, b = v["window_s"]
     rows = [
-        ("000 velocity, max RMS 5-10 s (m/s, rad/s)", f"{max(v['rms_5_10s']):.4f}", "< 0.05"),
-        ("000 z1* recovered (m)", f"{v['z1_star_recovered']:.6f}", "1.99"),
         (
-            "000 reconstruction, max R_bar error (deg)",
-            f"{g['visjax']['R_bar_deg']['max']:.1e}",
+            f"Chitrakaran et al., velocity: largest RMS error {a:g}-{b:g} s",
+            max(v["rms_window"]),
+            "m/s or rad/s",
+            "< 0.05",
+        ),
+        ("Chitrakaran et al., z1* recovered", v["z1_star_recovered"], "m", "1.99"),
+        (
+            "Chitrakaran et al., reconstruction: largest R_bar error",
+            g["visjax"]["R_bar_deg"]["max"],
+            "deg",
             f"OpenCV {g['opencv']['R_bar_deg']['max']:.1e}",
         ),
     ]
-    st = results["structure"]
+    st = results["structure"]["sets"]
     static = [n for n in st if n.startswith("I.")]
     moving = [n for n in st if n.startswith("II.")]
     for names, what in ((static, "static"), (moving, "moving")):
         mean = float(np.mean([st[n]["rms"] for n in names]))
         thesis = float(np.mean([st[n]["thesis_rms"] for n in names]))
-        rows.append((f"003 UIO {what} point, mean RMS (m)", f"{mean:.4f}", f"thesis {thesis:.4f}"))
-    tb = results["testbed"]
+        rows.append(
+            (f"Jang's thesis, UIO, {what} point: mean RMS", mean, "m", f"thesis {thesis:.4f}")
+        )
+    tb = results["testbed"]["sets"]
     for name in tb:
         rms = tb[name]["rms"]
-        value = f"{max(rms):.4f}" if rms is not None else "infeasible"
         rows.append(
             (
-                f"003 twin set {name}, worst-axis RMS (m)",
-                value,
+                f"Jang's thesis, testbed twin set {name}: worst-axis RMS"
+                + ("" if rms is not None else " (infeasible)"),
+                max(rms) if rms is not None else None,
+                "m",
                 f"thesis {max(tb[name]['thesis_rms']):.4f}",
             )
         )
     e = results["euclidean"]["final_position_error_m"]
-    rows.append(("004 structure, max final position error (mm)", f"{max(e) * 1000:.3f}", "aim 1"))
-    print("\n== summary ==")
-    for name, value, ref in rows:
-        print(f"{name:<46}{value:>12}   ({ref})")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(
-        json.dumps({"rows": [dict(zip(("what", "value", "reference"), r)) for r in rows]}, indent=2)
+    rows.append(
+        (
+            "Nath et al., structure: largest final position error",
+            max(e) * 1000,
+            "mm",
+            "aim 1",
+        )
     )
-    print(f"wrote {out}/ (velocity/, geometry/, structure/, euclidean/, testbed/, summary.json)")
+    table = [dict(zip(("what", "value", "unit", "reference"), r)) for r in rows]
+    print("\n== summary ==")
+    for r in table:
+        value = "infeasible" if r["value"] is None else f"{r['value']:.4g}"
+        print(f"{r['what']:<62}{value:>12} {r['unit']:<13}({r['reference']})")
+    out.mkdir(parents=True, exist_ok=True)
+    import pandas as pd
+
+    pd.DataFrame(table, columns=["what", "value", "unit", "reference"]).astype(
+        {"value": float}
+    ).to_parquet(out / "summary.parquet", index=False)
+    _summary(
+        "reproduce",
+        {"quick": quick, "rows": table},
+        settings=settings,
+        seed=None,
+        started=started,
+        out=out,
+    )
+    print(
+        f"wrote {out}/ (velocity/, geometry/, structure/, euclidean/, testbed/, summary.json, "
+        "summary.parquet)"
+    )
     return results

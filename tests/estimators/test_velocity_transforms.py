@@ -1,4 +1,4 @@
-"""jit, vmap and grad of the seed-000 helper functions, against finite differences."""
+"""jit, vmap and grad of the helper functions of Chitrakaran et al., against finite differences."""
 
 import jax
 import jax.numpy as jnp

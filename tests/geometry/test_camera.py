@@ -15,7 +15,7 @@ from visjax.geometry import (
     to_homogeneous,
 )
 
-# The camera of seed 000, eq. (62).
+# The camera of Chitrakaran et al., eq. (62).
 A62 = np.array([[1268.16, 0.0, 257.49], [0.0, 1267.50, 253.10], [0.0, 0.0, 1.0]])
 
 

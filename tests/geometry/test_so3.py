@@ -106,7 +106,8 @@ def test_sinc():
 
 @pytest.mark.parametrize("angle", [0.0, 1e-8, 1e-3, 0.7, 2.0, 3.0, np.pi - 1e-6])
 def test_L_omega_is_the_kinematics_of_e_omega(angle):
-    """e_dot = L_omega omega_e (seed 000 eq. (26)) with [omega_e]x = d(R_bar)/dt R_bar^T (A.2)."""
+    """e_dot = L_omega omega_e (Chitrakaran et al., eq. (26)) with
+    [omega_e]x = d(R_bar)/dt R_bar^T (A.2)."""
     rng = np.random.default_rng(3)
     for _ in range(5):
         e0 = _random_vectors(1, seed=rng.integers(1000), angles=[angle])[0]

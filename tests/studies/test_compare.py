@@ -60,6 +60,13 @@ def test_records_same_inputs_and_result_names():
     mean_rows = table[table.method == "mean"]
     np.testing.assert_allclose(mean_rows.latency_s_per_sample * 50, mean_rows.total_s)
     assert table.compile_s.notna().sum() == 2  # first seed only
+    # seeds from `first_seed`: the same records as those seeds in the full run
+    later = pd.DataFrame(
+        compare({"max": flagged_max}, inputs, score, seeds=2, first_seed=1, repeats=1)
+    )
+    assert list(later["seed"]) == [1, 2]
+    assert list(later["result"]) == expected[1:]
+    assert later.compile_s.notna().sum() == 1
 
 
 def test_bad_arguments():
@@ -67,6 +74,8 @@ def test_bad_arguments():
         compare({"mean": mean}, inputs, score, seeds=0)
     with pytest.raises(ValueError, match="updates"):
         compare({"mean": mean}, inputs, score, updates={"other": 3})
+    with pytest.raises(ValueError, match="first_seed"):
+        compare({"mean": mean}, inputs, score, first_seed=-1)
 
 
 def test_velocity_and_euclidean_problems_on_data_files(tmp_path):

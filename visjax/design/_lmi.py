@@ -1,4 +1,4 @@
-"""Gain design of the unknown input observer: the LMI of seed 003, section 3.6 (cvxpy).
+"""Gain design of the unknown input observer: the LMI of Jang's thesis, section 3.6 (cvxpy).
 
 With $F = -D(CD)^+$, $G = I_2 - (CD)(CD)^+$, $P_K = PK$, $P_Y = PY$, condition (3.6),
 $Q = N^TP + PN + (\\gamma_1^2 + \\gamma_2^2) P M M^T P + 2I_3 < 0$, is by a Schur complement
@@ -77,7 +77,7 @@ class UIODesign:
 
     def ultimate_bound(self, D2, d2_max: float) -> float:
         """The ultimate bound on $\\|e\\|$ under a second unknown input $D_2 d_2$,
-        $|d_2| \\le$ `d2_max` (the UUB split, THESIS_NOTES "UUB extension"), for a design
+        $|d_2| \\le$ `d2_max` (the UUB split of the thesis, chapter 3), for a design
         with `uub=True`: with $V = e^TPe$ and $Q + I_3 \\prec 0$ (eq. (3.6) plus $I_3$),
         $\\dot V \\le -\\|e\\|^2 + 2\\|PMD_2\\|\\,\\|e\\|\\,|d_2|$, so $V$ decreases outside
         $\\|e\\| \\le 2\\|PMD_2\\| d_{2,\\max}$ and $\\|e\\|$ ends below
@@ -100,7 +100,9 @@ def _as_arrays(A, C, D):
             f"expected A (3, 3), C (2, 3), D (3, 1) or (3,); got {A.shape}, {C.shape}, {D.shape}."
         )
     if np.linalg.matrix_rank(C @ D) != 1:
-        raise ValueError("rank(CD) must be 1 (seed 003, section 3.4): this D is not seen by C.")
+        raise ValueError(
+            "rank(CD) must be 1 (Jang's thesis, section 3.4): this D is not seen by C."
+        )
     return A, C, D
 
 
@@ -393,7 +395,7 @@ def design_uio(
         else:
             extra = " with these options (decay rate, structure, velocity range)."
         raise LMIInfeasibleError(
-            f"the UIO LMI (seed 003, section 3.6) is infeasible for gamma1^2 + gamma2^2 = "
+            f"the UIO LMI (Jang's thesis, section 3.6) is infeasible for gamma1^2 + gamma2^2 = "
             f"{lipschitz:g} (solver status: {status})" + extra
         )
     P, K, Y, K_u = prob.values()

@@ -25,7 +25,7 @@ from .._util import chunked_map
 
 
 class AbstractEstimator(eqx.Module):
-    """The contract every visjax estimator fulfils (see DESIGN.md).
+    """The contract every visjax estimator fulfils.
 
     Required:
 

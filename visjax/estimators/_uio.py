@@ -1,4 +1,4 @@
-"""The unknown input observer (UIO) of seed 003 (Jang's thesis, chapters 2-3).
+"""The unknown input observer (UIO) of Jang's thesis (chapters 2-3).
 
 Perspective dynamics of a point seen by a moving camera, in the state
 $x = [X/Z, Y/Z, 1/Z]$ with output $y = [x_1, x_2]$, measured camera velocities
@@ -112,7 +112,7 @@ def rank_condition(A, C, D, *, tol: float = 1e-9) -> bool:
 
     (3.20): $\\mathrm{rank}\\begin{bmatrix} sI_3 - A & D \\\\ C & 0 \\end{bmatrix} = 4$ for
     every complex $s$. Given $\\mathrm{rank}(CD) = \\mathrm{rank}(D)$, it holds exactly when
-    $(M_0 A, C)$ is observable, $M_0 = I_3 - D(CD)^+C$ (THESIS_NOTES, ch. 3.4): the pencil can
+    $(M_0 A, C)$ is observable, $M_0 = I_3 - D(CD)^+C$ (the thesis, section 3.4): the pencil can
     lose rank only at an unobservable eigenvalue of $M_0 A$. Both are evaluated here: the
     observability matrix, and the pencil's rank at every eigenvalue of $M_0 A$. NumPy, a
     design-time check (not jit).
@@ -171,7 +171,7 @@ class UnknownInputObserver(AbstractEstimator):
 
     **The system.** $\\dot x = A x + \\bar f(x, u) + g(y, u) + D_1 d_1 + D_2 d_2$ (eqs. (3.1),
     (3.2)). $D_1$ (`D`) is decoupled exactly ($M D_1 = 0$, eq. (3.5)); $D_2$ (`D2`, default
-    0) is the second unknown input of the UUB split (THESIS_NOTES, "UUB extension"), not
+    0) is the second unknown input of the UUB split (the thesis, chapter 3), not
     decoupled: it enters the error as $\\dot e = N e + M(\\bar f(\\hat x) - \\bar f(x)) -
     M D_2 d_2$ (`disturbance_input` returns $M D_2$), so the error is uniformly ultimately
     bounded, in proportion to $\\sup |d_2|$, when $N$ satisfies the UUB condition $Q + I_3 <

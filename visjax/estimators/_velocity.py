@@ -1,4 +1,4 @@
-"""The fixed-camera 6-DoF velocity estimator of seed 000, sections 4 and 5.
+"""The fixed-camera 6-DoF velocity estimator of Chitrakaran et al., sections 4 and 5.
 
 Source: Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity with a
 fixed camera*. Signals: the error $e = [e_v, e_\\omega]$ (eqs. (18)-(20), (24), (28)), the
@@ -59,7 +59,7 @@ def error_signal(
     alpha1: Float[ArrayLike, ""],
     R_bar: Float[ArrayLike, "3 3"],
 ) -> Float[Array, "6"]:
-    """The error $e = [e_v, e_\\omega]$ of seed 000.
+    """The error $e = [e_v, e_\\omega]$ of Chitrakaran et al.
 
     $e_v = p_e - p_e^* = [u_1 - u_1^*, v_1 - v_1^*, -\\ln\\alpha_1]$ (eqs. (18)-(20), the third
     entry being $\\ln z_1 - \\ln z_1^* = -\\ln\\alpha_1$), and $e_\\omega = u\\theta$ of
@@ -148,7 +148,7 @@ def velocity_measurements(
     visible: Bool[ArrayLike, " n"] | None = None,
     throw: bool = True,
 ) -> VelocityMeasurement:
-    """$e$, $J$ and $J^{-1}$ of one frame (seed 000, sections 3-5). Vmap it over frames.
+    """$e$, $J$ and $J^{-1}$ of one frame (Chitrakaran et al., sections 3-5). Vmap it over frames.
 
     The reconstruction uses the known-normal path (smooth at the reference pose, where the
     paper's simulation starts); $R = \\bar R R^*$ (eq. (8)).
@@ -441,7 +441,7 @@ class VelocityDiagnostics(eqx.Module):
 
 @final
 class VelocityEstimator(AbstractEstimator):
-    """The continuous sign-based velocity estimator of seed 000, eqs. (39)-(40).
+    """The continuous sign-based velocity estimator of Chitrakaran et al., eqs. (39)-(40).
 
     State: $(\\hat e, \\eta)$ with $\\eta = \\int_{t_0}^t (K + I_6)\\tilde e + \\rho\\,
     \\mathrm{sgn}(\\tilde e)\\, d\\tau$, $\\tilde e = e - \\hat e$ (eq. (36)). Then

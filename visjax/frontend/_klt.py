@@ -1,4 +1,4 @@
-"""KLT point tracking (seed 003, section 2.4). NumPy and OpenCV: never inside jit.
+"""KLT point tracking (Jang's thesis, section 2.4). NumPy and OpenCV: never inside jit.
 
 The thesis tracks with the pure-translation model $I_1(m + d) = I_0(m)$ over a small
 window $w$: minimising $\\int_w [I_1(m + d) - I_0(m)]^2 \\omega\\, dm$ gives $Z d = e$ with

@@ -1,4 +1,4 @@
-"""Least-squares refinement of the camera matrix (seed 003, section 2.3).
+"""Least-squares refinement of the camera matrix (Jang's thesis, section 2.3).
 
 Model: $[u, v, 1]^T = K_c [m_1, m_2, 1]^T$ with $K_c = [[f, 0, c_x], [0, a f, c_y], [0, 0, 1]]$.
 The linear regression $S\\theta = \\beta$, $\\theta = [f, af, c_x, c_y]$, rows of $S$
@@ -18,7 +18,7 @@ def camera_matrix_lstsq(
     m: Float[ArrayLike, "n 2"], p: Float[ArrayLike, "n 2"]
 ) -> Float[Array, "4"]:
     """$\\hat\\theta = [f, af, c_x, c_y]$ by least squares from normalized coordinates `m` and
-    pixels `p` of the same points (seed 003, section 2.3).
+    pixels `p` of the same points (Jang's thesis, section 2.3).
 
     Raises at run time if a coordinate is not finite, or if the normalized coordinates do
     not vary along an axis (the regression is then singular). Each axis is solved from
@@ -57,7 +57,7 @@ def camera_matrix_lstsq(
 
 
 def camera_matrix(theta: Float[ArrayLike, "4"]) -> Float[Array, "3 3"]:
-    """$K_c$ from $\\theta = [f, af, c_x, c_y]$ (seed 003, section 2.2).
+    """$K_c$ from $\\theta = [f, af, c_x, c_y]$ (Jang's thesis, section 2.2).
 
     No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
     computed from it; none is turned finite).

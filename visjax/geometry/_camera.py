@@ -1,6 +1,6 @@
 """Pinhole camera: the intrinsic matrix, pixel <-> normalized coordinates, projection.
 
-Source: seed 000 (Chitrakaran et al.), eqs. (10), (14), (15) and (22).
+Source: Chitrakaran et al., eqs. (10), (14), (15) and (22).
 
 Convention: pixel coordinates are $p = [u, v]$ with $[u, v, 1]^T = A\\,[x, y, 1]^T$ (eq. (15)),
 where $m = [x, y, 1]^T = \\bar m / z$ are the normalized coordinates of a point $\\bar m$
@@ -161,7 +161,7 @@ def project_checked(
 
 
 def extended_intrinsics(A: Float[ArrayLike, "3 3"]) -> Float[Array, "3 3"]:
-    """The matrix $A_e$ of seed 000 eq. (22): $A$ with the principal point removed.
+    """The matrix $A_e$ of Chitrakaran et al., eq. (22): $A$ with the principal point removed.
 
     $A_e = A - [[0, 0, u_0], [0, 0, v_0], [0, 0, 0]]$, which maps the rate of the
     normalized coordinates to the rate of the extended image coordinates

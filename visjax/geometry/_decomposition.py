@@ -1,6 +1,6 @@
 """Euclidean decomposition of a homography into rotation, scaled translation and normal.
 
-Source: seed 000 (Chitrakaran et al.), eq. (12): $H = \\bar R + \\bar x_h n^{*T}$, decomposed
+Source: Chitrakaran et al., eq. (12): $H = \\bar R + \\bar x_h n^{*T}$, decomposed
 "by various techniques (Faugeras and Lustman, 1988; Zhang and Hanson, 1995)".
 
 Two paths:
@@ -118,7 +118,7 @@ def _check_H_K(H, K):
 def decompose_homography(
     H: Float[ArrayLike, "3 3"], K: Float[ArrayLike, "3 3"] | None = None
 ) -> tuple[Float[Array, "4 3 3"], Float[Array, "4 3"], Float[Array, "4 3"]]:
-    """All four Euclidean decompositions $H \\propto R + t n^T$ (seed 000, eq. (12)).
+    """All four Euclidean decompositions $H \\propto R + t n^T$ (Chitrakaran et al., eq. (12)).
 
     Convention: the same as `cv2.decomposeHomographyMat(H, K)`. With `K`, `H` is a pixel
     homography and $K^{-1} H K$ is decomposed; without, `H` is already Euclidean. `H` may

@@ -1,6 +1,6 @@
 """Homography from point correspondences: normalized DLT and the products alpha_i g33.
 
-Source: seed 000 (Chitrakaran et al.), section 3, eqs. (12), (16) and (17).
+Source: Chitrakaran et al., section 3, eqs. (12), (16) and (17).
 
 Convention: the projective homography $G$ maps reference pixels to current pixels,
 $p_i = \\alpha_i G p_i^*$ (eq. (16)), with $p = [u, v, 1]^T$ and $\\alpha_i = z_i^*/z_i$.

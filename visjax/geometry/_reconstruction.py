@@ -1,4 +1,4 @@
-"""Euclidean reconstruction from reference and current pixels (seed 000, section 3).
+"""Euclidean reconstruction from reference and current pixels (Chitrakaran et al., section 3).
 
 From four or more coplanar points seen in a reference image and a current image, with the
 intrinsic matrix known: the normalized projective homography $G_n$ and the products
@@ -23,7 +23,7 @@ from ._homography import _check_pair, _dlt, euclidean_homography
 
 @final
 class Reconstruction(eqx.Module):
-    """What the Euclidean reconstruction of seed 000, section 3, returns.
+    """What the Euclidean reconstruction of Chitrakaran et al., section 3, returns.
 
     **Fields:**
 
@@ -60,7 +60,7 @@ def euclidean_reconstruction(
     visible: Bool[ArrayLike, " n"] | None = None,
     throw: bool = True,
 ) -> Reconstruction:
-    """Euclidean reconstruction of seed 000, section 3, from pixels and $A$.
+    """Euclidean reconstruction of Chitrakaran et al., section 3, from pixels and $A$.
 
     Steps: $G_n$ by the normalized DLT of eq. (17); $\\alpha_i g_{33} = 1/(G_n p_i^*)_3$;
     $H / g_{33} = A^{-1} G_n A$ (eq. (16)); the decomposition of eq. (12), which also fixes

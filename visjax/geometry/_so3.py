@@ -6,7 +6,7 @@ logarithm) has a Taylor branch chosen with the double-`where` pattern, so that n
 value nor the gradient is NaN there.
 
 Source: Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity with
-a fixed camera* (seed 000), eqs. (24)-(31) and (A.3).
+a fixed camera*, eqs. (24)-(31) and (A.3).
 """
 
 import equinox as eqx
@@ -31,7 +31,7 @@ def skew(v: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
 
     - `v`: a 3-vector.
 
-    **Returns:** the 3x3 matrix $[v]_\\times$ (seed 000, notation of eq. (27)).
+    **Returns:** the 3x3 matrix $[v]_\\times$ (Chitrakaran et al., notation of eq. (27)).
 
     No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
     computed from it; none is turned finite).
@@ -60,7 +60,8 @@ def vee(S: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
 
 
 def sinc(x: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
-    """The unnormalised sinc, $\\mathrm{sinc}(x) = \\sin(x) / x$ (seed 000, below eq. (27)).
+    """The unnormalised sinc, $\\mathrm{sinc}(x) = \\sin(x) / x$ (Chitrakaran et al., below
+    eq. (27)).
 
     Convention: unnormalised (unlike `numpy.sinc`, which is $\\sin(\\pi x)/(\\pi x)$);
     $\\mathrm{sinc}(0) = 1$ with a finite gradient there.
@@ -91,7 +92,7 @@ def _rotation_coefficients(t2):
 def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """The exponential map from a rotation vector $\\theta u$ to a rotation matrix.
 
-    Implements the Rodrigues form of seed 000 eq. (A.3),
+    Implements the Rodrigues form of Chitrakaran et al., eq. (A.3),
     $R = I_3 + \\sin\\theta [u]_\\times + 2 \\sin^2(\\theta/2) [u]_\\times^2$,
     written in $\\omega = \\theta u$ so that it is smooth at $\\theta = 0$.
 
@@ -113,8 +114,9 @@ def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
 def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     """The logarithm of a rotation matrix as a rotation vector $e_\\omega = u\\theta$.
 
-    Implements seed 000 eqs. (24) and (28): $\\theta = \\cos^{-1}((\\mathrm{tr} R - 1)/2)$,
-    $[u]_\\times = (R - R^T) / (2 \\sin\\theta)$, with $0 \\le \\theta \\le \\pi$ (eq. (29)).
+    Implements Chitrakaran et al., eqs. (24) and (28):
+    $\\theta = \\cos^{-1}((\\mathrm{tr} R - 1)/2)$, $[u]_\\times = (R - R^T) / (2 \\sin\\theta)$,
+    with $0 \\le \\theta \\le \\pi$ (eq. (29)).
 
     Convention: the angle is computed as `atan2(|vee(R - R^T)|/2, (tr R - 1)/2)`, which is
     accurate at every angle (the `arccos` of eq. (28) loses half the digits near 0 and pi).
@@ -198,7 +200,7 @@ def _L_omega_coefficient(t2):
 def L_omega(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """The rotational Jacobian $L_\\omega$ with $\\dot e_\\omega = L_\\omega \\omega_e$.
 
-    Implements seed 000 eq. (27),
+    Implements Chitrakaran et al., eq. (27),
     $L_\\omega = I_3 - \\frac{\\theta}{2}[u]_\\times
     + \\left(1 - \\frac{\\mathrm{sinc}\\theta}{\\mathrm{sinc}^2(\\theta/2)}\\right)[u]_\\times^2$,
     written in $e_\\omega = u\\theta$ so that it is smooth (value and gradient) at

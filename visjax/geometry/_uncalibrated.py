@@ -1,4 +1,4 @@
-"""The uncalibrated camera on a moving platform of seed 004, sections II and III.
+"""The uncalibrated camera on a moving platform of Nath et al., sections II and III.
 
 Source: Nath, Dawson, Tatlicioglu, *Euclidean position estimation of static features using a
 moving uncalibrated camera*. A camera rigidly mounted on a platform (an end effector) whose
@@ -42,7 +42,7 @@ def intrinsics_eq4(
     u0: float | ArrayLike,
     v0: float | ArrayLike,
 ) -> Float[Array, "3 3"]:
-    """$A$ of seed 004 eq. (4): $[[f k_u, f k_u \\cot\\phi, u_0], [0, f k_v/\\sin\\phi, v_0],
+    """$A$ of Nath et al., eq. (4): $[[f k_u, f k_u \\cot\\phi, u_0], [0, f k_v/\\sin\\phi, v_0],
     [0, 0, 1]]$, with $\\phi$ the angle between the camera axes ($\\pi/2$: no skew).
 
     No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry

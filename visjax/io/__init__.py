@@ -1,5 +1,7 @@
 """Documented data formats: each estimator's input as a file (NPZ, and CSV for pixel
-tracks), for users with their own logged data. See `visjax.io._formats` for the tables."""
+tracks), for users with their own logged data (the tables are in `visjax.io._formats`); and
+the outputs of the command line: the schema of every `summary.json`, table and array file
+(`SUMMARIES`, `TABLES`, `ARRAYS`), checked when written and loaded with `read_summary`."""
 
 from ._formats import (
     DataFormatError as DataFormatError,
@@ -8,4 +10,15 @@ from ._formats import (
     VelocityData as VelocityData,
     load_tracks_csv as load_tracks_csv,
     save_tracks_csv as save_tracks_csv,
+)
+from ._outputs import (
+    ARRAYS as ARRAYS,
+    COMMON as COMMON,
+    SUMMARIES as SUMMARIES,
+    TABLES as TABLES,
+    finite_or_null as finite_or_null,
+    read_summary as read_summary,
+    schema_markdown as schema_markdown,
+    validate_summary as validate_summary,
+    write_summary as write_summary,
 )

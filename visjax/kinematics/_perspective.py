@@ -1,4 +1,4 @@
-"""Perspective dynamics of a point seen by a moving camera (seed 003, eq. (2.11)).
+"""Perspective dynamics of a point seen by a moving camera (Jang's thesis, eq. (2.11)).
 
 Written once and used by both the simulator (`visjax.sim`, the truth) and the unknown
 input observer (`visjax.estimators`). State $x = [X/Z, Y/Z, 1/Z]$ of the point in the

@@ -1,6 +1,6 @@
 """Rigid-body motion: the pose of an object moving with a given velocity.
 
-Source: seed 000, eq. (A.1), $[\\omega_e]_\\times = \\dot R R^T$, and $\\dot x_f = v_e$
+Source: Chitrakaran et al., eq. (A.1), $[\\omega_e]_\\times = \\dot R R^T$, and $\\dot x_f = v_e$
 (the derivative of eq. (5) for the origin of $\\mathcal F$): both velocities are expressed in
 the fixed frame $\\mathcal I$.
 """

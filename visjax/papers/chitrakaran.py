@@ -192,14 +192,15 @@ def velocity_experiment(
 
 
 def summarise(r: VelocityRun, duration: float, rate_hz: float, noise_px: float) -> dict:
-    """`summary.json` of `visjax velocity`: RMS and max error per DOF over 5-10 s."""
+    """The results of `visjax velocity` (its `summary.json`, kind `velocity`): RMS and max
+    error per DOF over the scoring window `window(duration)` (5-10 s for the paper's 10 s)."""
     a, b = window(duration)
     t = np.asarray(r.ts)
     inside = (t >= a) & (t < b)
     err = np.asarray(r.estimate)[inside] - np.asarray(r.velocity)[inside]
     return {
-        "rms_5_10s": [float(x) for x in np.sqrt(np.mean(err**2, axis=0))],
-        "max_5_10s": [float(x) for x in np.max(np.abs(err), axis=0)],
+        "rms_window": [float(x) for x in np.sqrt(np.mean(err**2, axis=0))],
+        "max_window": [float(x) for x in np.max(np.abs(err), axis=0)],
         "order": list(DOF_NAMES),
         "window_s": [a, b],
         "rate_hz": rate_hz,

@@ -283,12 +283,17 @@ def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> Unkno
 
 @final
 class StructureRun(eqx.Module):
-    """One set: times, true and estimated positions (metres, camera frame), RMS window."""
+    """One set: times, true and estimated positions (metres, camera frame), RMS window, and
+    the camera velocity the observer was given at the 30 Hz frames (`frame_ts`,
+    `camera_velocity` (F, 6) $= [v_c, \\omega_c]$ in m/s and rad/s, camera frame: the
+    thesis' Figs. 5-5/5-6 and their like for each set)."""
 
     ts: Float[Array, " N"]
     position: Float[Array, "N 3"]
     estimate: Float[Array, "N 3"]
     rms: Float[Array, "3"]
+    frame_ts: Float[Array, " F"]
+    camera_velocity: Float[Array, "F 6"]
 
 
 def structure_experiment(
@@ -310,8 +315,15 @@ def structure_experiment(
     truth = sc.position[::10]
     steady = sol.ts >= duration / 2
     err = np.asarray(estimate - truth)[np.asarray(steady)]
+    # the thesis' lengths are in cm: the camera's linear velocity to m/s
+    to_si = jnp.array([0.01, 0.01, 0.01, 1.0, 1.0, 1.0])
     return StructureRun(
-        ts=sol.ts, position=truth, estimate=estimate, rms=jnp.sqrt(jnp.mean(err**2, axis=0))
+        ts=sol.ts,
+        position=truth,
+        estimate=estimate,
+        rms=jnp.sqrt(jnp.mean(err**2, axis=0)),
+        frame_ts=sc.frame_ts,
+        camera_velocity=sc.frame_velocities * to_si[None, :],
     )
 
 

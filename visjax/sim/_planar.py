@@ -1,4 +1,4 @@
-"""Random planar scenes for the Euclidean reconstruction of seed 000, section 3.
+"""Random planar scenes for the Euclidean reconstruction of Chitrakaran et al., section 3.
 
 A plane with unit normal $n^*$ at distance $d^*$ from the camera (eq. (4)) carries points
 seen in a reference image; the plane then moves by $(\\bar R, \\bar x_f)$, so that
@@ -47,7 +47,7 @@ class PlanarScenes:
 
 
 def rotation_from_vector(omega: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula in NumPy (seed 000, eq. (A.3)), for data generation."""
+    """Rodrigues' formula in NumPy (Chitrakaran et al., eq. (A.3)), for data generation."""
     theta = float(np.linalg.norm(omega))
     if theta == 0.0:
         return np.eye(3)

@@ -19,7 +19,8 @@ def fixed_camera_pixels(
     body: Trajectory, points: Float[ArrayLike, "n 3"], A: Float[ArrayLike, "3 3"]
 ) -> Float[Array, "N n 2"]:
     """Pixels of points fixed on a moving body, seen by a fixed camera whose frame is the
-    fixed frame: $\\bar m_i = x + R s_i$ (seed 000, eq. (5)), then $p_i = A m_i$ (eq. (15)).
+    fixed frame: $\\bar m_i = x + R s_i$ (Chitrakaran et al., eq. (5)), then $p_i = A m_i$
+    (eq. (15)).
 
     **Arguments:** `body` the body's `Trajectory`; `points` (n, 3) the points in the body
     frame; `A` the intrinsics.
@@ -39,7 +40,7 @@ def platform_camera_pixels(
     points: Float[ArrayLike, "n 3"],
 ) -> Float[Array, "N n 2"]:
     """Pixels of static world points seen by a camera mounted at `(R_c, x_c)` on a platform
-    whose pose `(R_b, x_b)` moves (seed 004, eqs. (1)-(4); `geometry.feature_in_camera`)."""
+    whose pose `(R_b, x_b)` moves (Nath et al., eqs. (1)-(4); `geometry.feature_in_camera`)."""
     R_b, x_b, points = as_float(R_b), as_float(x_b), as_float(points)
     check_shape(points, (None, 3), "points")
 

@@ -18,6 +18,7 @@ def compare(
     score: Callable[[str, Any, Any], dict],
     *,
     seeds: int = 4,
+    first_seed: int = 0,
     updates: Mapping[str, int] | None = None,
     repeats: int = 3,
     progress: bool = False,
@@ -32,7 +33,9 @@ def compare(
     - `inputs`: `key -> (inputs, truth)`, the noisy measurements of one seed (every method
         sees the same ones) and the ground truth for `score`.
     - `score`: `(name, solution, truth) -> dict` of accuracy numbers (JSON-able).
-    - `seeds`: noise seeds `0, ..., seeds - 1` (`jax.random.key(seed)`).
+    - `seeds`: how many noise seeds: `first_seed, ..., first_seed + seeds - 1`
+        (`jax.random.key(seed)`).
+    - `first_seed`: the first of them (default 0).
     - `updates`: per method, how many estimate updates one call makes, for the latency:
         the number of samples for a recursive method (an observer, a filter: constant cost
         per new sample), the number of window fits for a sliding-window fit, 1 for a batch
@@ -43,13 +46,15 @@ def compare(
 
     **Returns:** one record per (method, seed): `method`, `seed`, `result` (the result
     code's name), `latency_s_per_sample` (median call time / updates), `total_s` (median
-    call time), `compile_s` (the first call, compilation included: first seed only, else
+    call time), `compile_s` (the first call, compilation included: `first_seed` only, else
     `None`) and the keys of `score`.
     """
     if seeds < 1:
         raise ValueError(f"`seeds` must be at least 1; got {seeds}.")
     if repeats < 1:
         raise ValueError(f"`repeats` must be at least 1; got {repeats}.")
+    if not (isinstance(first_seed, int) and first_seed >= 0):
+        raise ValueError(f"`first_seed` must be a non-negative int; got {first_seed!r}.")
     updates = dict(updates or {})
     unknown = set(updates) - set(methods)
     if unknown:
@@ -59,7 +64,7 @@ def compare(
     from tqdm import tqdm
 
     bar = tqdm(total=seeds * len(methods), desc="compare", unit="run", disable=not progress)
-    for seed in range(seeds):
+    for seed in range(first_seed, first_seed + seeds):
         data, truth = inputs(jax.random.key(seed))
         for name, fn in compiled.items():
             t0 = time.perf_counter()
@@ -78,7 +83,7 @@ def compare(
                     "result": result_names(sol.result),
                     "latency_s_per_sample": total / updates.get(name, 1),
                     "total_s": total,
-                    "compile_s": first if seed == 0 else None,
+                    "compile_s": first if seed == first_seed else None,
                     **score(name, sol, truth),
                 }
             )

@@ -1,0 +1,156 @@
+"""The documentation site: `mkdocs build --strict` succeeds, every public name of the package
+has its entry in the API reference, and the pages' code names only what exists."""
+
+import ast
+import importlib
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+import time
+import types
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+# the subpackages whose `__init__.py` re-exports the public API
+PACKAGES = (
+    "geometry",
+    "kinematics",
+    "sim",
+    "estimators",
+    "baselines",
+    "design",
+    "frontend",
+    "io",
+    "studies",
+)
+# the papers' modules, documented member by member
+PAPERS = ("chitrakaran", "jang", "nath")
+
+pytestmark = pytest.mark.skipif(
+    not (ROOT / "mkdocs.yml").exists(), reason="no mkdocs.yml (not a source checkout)"
+)
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """The site, built once for this module: `(site directory, build seconds)`."""
+    out = tmp_path_factory.mktemp("site")
+    env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    elapsed = time.perf_counter() - start
+    tail = (proc.stdout + proc.stderr)[-4000:]
+    assert proc.returncode == 0, f"mkdocs build --strict failed ({elapsed:.1f} s):\n{tail}"
+    return out, elapsed
+
+
+def _package_names(name: str) -> set[str]:
+    """The public names `visjax.<name>` re-exports: everything in `dir()` that is neither
+    private nor a module."""
+    module = importlib.import_module(f"visjax.{name}")
+    return {
+        n
+        for n in dir(module)
+        if not n.startswith("_") and not isinstance(getattr(module, n), types.ModuleType)
+    }
+
+
+def _paper_names(name: str) -> set[str]:
+    """The public names defined (not imported) at the top level of `visjax.papers.<name>`."""
+    module = importlib.import_module(f"visjax.papers.{name}")
+    tree = ast.parse(Path(module.__file__).read_text())
+    names = set()
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Assign):
+            names.update(t.id for t in node.targets if isinstance(t, ast.Name))
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            names.add(node.target.id)
+    return {n for n in names if not n.startswith("_")}
+
+
+def _public_names() -> dict[str, set[str]]:
+    """Every documented object's full path, by module."""
+    names = {f"visjax.{p}": _package_names(p) for p in PACKAGES}
+    names.update({f"visjax.papers.{p}": _paper_names(p) for p in PAPERS})
+    names["visjax"] = {"RESULTS"}
+    return names
+
+
+def test_site_builds_strict_with_every_public_name(site):
+    """The strict build succeeds (the fixture), and the API reference has an entry (an
+    anchor `id="visjax.<module>.<name>"`) for every public name and for each result code
+    visjax adds to diffrax's. One test, so that under pytest-xdist the site is built once."""
+    out, elapsed = site
+    print(f"mkdocs build --strict: {elapsed:.1f} s")
+    for page in ("index", "papers/chitrakaran", "papers/jang", "papers/nath", "runner"):
+        assert (out / page.removesuffix("index") / "index.html").exists(), page
+
+    html = "\n".join(p.read_text() for p in sorted((out / "api").rglob("*.html")))
+    anchors = set(re.findall(r'id="(visjax[\w.]*)"', html))
+    names = _public_names()
+    assert all(names.values()), {m: n for m, n in names.items() if not n}
+    missing = sorted(
+        f"{module}.{name}"
+        for module, module_names in names.items()
+        for name in module_names
+        if f"{module}.{name}" not in anchors
+    )
+    assert not missing, f"public names without an entry in the API reference: {missing}"
+
+    tree = ast.parse((ROOT / "visjax" / "_results.py").read_text())
+    (cls,) = [n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "RESULTS"]
+    codes = [t.id for n in cls.body if isinstance(n, ast.Assign) for t in n.targets]
+    assert len(codes) >= 10, codes
+    missing = [c for c in codes if f"visjax.RESULTS.{c}" not in anchors]
+    assert not missing, f"result codes without an entry in the API reference: {missing}"
+
+
+def _code_blocks(language: str):
+    for page in sorted(DOCS.rglob("*.md")):
+        for block in re.findall(rf"```{language}\n(.*?)```", page.read_text(), flags=re.S):
+            yield page.relative_to(DOCS), block
+
+
+def test_python_blocks_parse_and_import_what_exists():
+    """Every Python block parses, and every name it imports from visjax exists (a block
+    that calls `run(...)` with `...` is a signature, not code)."""
+    checked = 0
+    for page, block in _code_blocks("python"):
+        if block.lstrip().startswith("run(estimator"):
+            continue
+        tree = ast.parse(block, filename=str(page))
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.ImportFrom)
+                and node.module
+                and node.module.startswith("visjax")
+            ):
+                module = importlib.import_module(node.module)
+                for alias in node.names:
+                    assert hasattr(module, alias.name) or importlib.util.find_spec(
+                        f"{node.module}.{alias.name}"
+                    ), f"{page}: `from {node.module} import {alias.name}`: no such name"
+                checked += 1
+    assert checked > 0
+
+
+def test_pages_name_the_papers_not_their_files():
+    for page in sorted(DOCS.rglob("*.md")):
+        text = page.read_text()
+        found = re.findall(r"seed[ -]?00[034]|00[034]_[0-9a-f]{16}", text, flags=re.I)
+        assert not found, f"{page.relative_to(DOCS)}: {found}"

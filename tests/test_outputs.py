@@ -1,0 +1,197 @@
+"""Every output of `visjax reproduce --quick` loads with pandas or NumPy and follows its
+documented schema (`visjax.io.SUMMARIES`, `TABLES`, `ARRAYS`); the schema checks refuse
+what does not."""
+
+import json
+import math
+import pathlib
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from visjax import __version__
+from visjax.cli import main
+from visjax.io import (
+    ARRAYS,
+    COMMON,
+    SUMMARIES,
+    TABLES,
+    read_summary,
+    schema_markdown,
+    validate_summary,
+    write_summary as write,
+)
+
+MAGIC = {".png": b"\x89PNG", ".pdf": b"%PDF", ".svg": b"<?xml"}
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce") / "results"
+    assert main(["reproduce", "--quick", "--quiet", "--format", "png,pdf", "--out", str(out)]) == 0
+    return out
+
+
+def _schema_columns(relative: str):
+    """The documented columns of a table, by its folder and name."""
+    for name, columns in TABLES.items():
+        if name == relative or name.replace("reproduce ", "") == relative:
+            return columns
+    return None
+
+
+def _schema_arrays(relative: str):
+    for name, arrays in ARRAYS.items():
+        pattern = name.replace("<set>", "")
+        if name == relative or (
+            "<set>" in name and relative.startswith(pattern.split("_")[0] + "_")
+        ):
+            return {k.rstrip("?"): k.endswith("?") for k in arrays}
+    return None
+
+
+def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
+    files = sorted(p for p in results.rglob("*") if p.is_file())
+    kinds = {}
+    for path in files:
+        rel = path.relative_to(results).as_posix()
+        suffix = path.suffix
+        if path.name == "summary.json":
+            series = read_summary(path)  # pandas, checked against its schema
+            assert series["visjax_version"] == __version__
+            assert isinstance(series["settings"], dict) and series["wall_time_s"] > 0
+            kinds[rel] = series["kind"]
+        elif suffix == ".json":
+            assert isinstance(json.loads(path.read_text()), dict), rel
+        elif suffix == ".parquet":
+            table = pd.read_parquet(path)
+            assert len(table) > 0, rel
+            columns = _schema_columns(rel)
+            if columns is not None:
+                assert list(table.columns) == list(columns), rel
+                for column, kind in columns.items():
+                    if kind == "float":
+                        assert pd.api.types.is_float_dtype(table[column]), (rel, column)
+                    elif kind == "int":
+                        assert pd.api.types.is_integer_dtype(table[column]), (rel, column)
+        elif suffix == ".csv":
+            assert len(pd.read_csv(path)) > 0, rel
+        elif suffix == ".npz":
+            with np.load(path) as data:
+                expected = _schema_arrays(rel)
+                if expected is not None:
+                    required = {k for k, optional in expected.items() if not optional}
+                    assert required <= set(data.files) <= set(expected), (rel, data.files)
+                t = data["t"] if "t" in data.files else data["ts"]
+                assert t.ndim == 1 and np.all(np.diff(t) > 0), rel
+                for key in data.files:
+                    if data[key].dtype.kind == "f" and data[key].shape[:1] == t.shape:
+                        assert data[key].shape[0] == t.shape[0], (rel, key)
+        elif suffix in MAGIC:
+            assert path.read_bytes()[:5].startswith(MAGIC[suffix]), rel
+        elif suffix == ".mp4":
+            assert path.stat().st_size > 1000, rel
+        else:
+            raise AssertionError(f"an output with no documented format: {rel}")
+    # one summary per command, each of its documented kind
+    assert kinds == {
+        "summary.json": "reproduce",
+        "velocity/summary.json": "velocity",
+        "geometry/summary.json": "geometry",
+        "structure/summary.json": "structure",
+        "euclidean/summary.json": "euclidean",
+        "testbed/summary.json": "testbed",
+    }
+    # every figure in both formats asked for
+    pngs = {p.with_suffix("") for p in results.rglob("*.png")}
+    pdfs = {p.with_suffix("") for p in results.rglob("*.pdf")}
+    assert pngs == pdfs and len(pngs) >= 5
+    # every set's trajectory saved, with the camera-velocity figure of the thesis
+    for name in ("I.1", "I.2", "I.3", "I.4", "II.1", "II.2", "II.3"):
+        assert (results / "structure" / f"estimate_{name}.npz").is_file()
+        assert (results / "structure" / f"camera_velocity_{name}.png").is_file()
+
+
+def test_the_reproduce_table_holds_numbers(results):
+    top = json.loads((results / "summary.json").read_text())
+    assert top["quick"] is True and top["settings"]["quick"] is True
+    for row in top["rows"]:
+        assert set(row) == {"what", "value", "unit", "reference"}
+        assert row["value"] is None or isinstance(row["value"], float), row
+        assert "seed 0" not in row["what"]
+    table = pd.read_parquet(results / "summary.parquet")
+    assert table["value"].dtype == np.float64
+    np.testing.assert_allclose(
+        table["value"].to_numpy(),
+        [np.nan if r["value"] is None else r["value"] for r in top["rows"]],
+    )
+    velocity = read_summary(results / "velocity" / "summary.json")
+    # the scoring window is the paper's 5-10 s for its 10 s run, named by value, not by key
+    assert velocity["window_s"] == [5.0, 10.0] and len(velocity["rms_window"]) == 6
+    assert max(velocity["rms_window"]) == pytest.approx(top["rows"][0]["value"])
+    estimate = np.load(results / "velocity" / "estimate.npz")
+    err = estimate["v_hat"] - estimate["velocity"]
+    inside = (estimate["t"] >= 5.0) & (estimate["t"] < 10.0)
+    np.testing.assert_allclose(
+        np.sqrt(np.mean(err[inside] ** 2, axis=0)), velocity["rms_window"], rtol=1e-12
+    )
+    # the structure table equals its summary
+    structure = read_summary(results / "structure" / "summary.json")
+    sets = pd.read_parquet(results / "structure" / "sets.parquet")
+    for name, record in structure["sets"].items():
+        rows = sets[sets["set"] == name].sort_values("axis")
+        np.testing.assert_allclose(rows["rms_m"], record["rms"], rtol=1e-12)
+
+
+def _valid(kind="euclidean"):
+    body = {
+        "final_position_error_m": [0.001, float("nan")],
+        "duration_s": 1.0,
+        "noise_px": 0.0,
+        "final_camera_prediction_error_px": 0.2,
+        "covariance_resets": 3,
+    }
+    meta = {
+        "kind": kind,
+        "visjax_version": __version__,
+        "jax_version": "0",
+        "created_utc": "2026-01-01T00:00:00+00:00",
+        "wall_time_s": 1.5,
+        "seed": None,
+        "settings": {"duration": 1.0},
+    }
+    return {**meta, **body}
+
+
+def test_schema_checks_refuse_what_is_not_documented(tmp_path):
+    written = write(tmp_path / "summary.json", _valid())
+    assert written["final_position_error_m"][1] is None  # NaN is written as null
+    loaded = pd.read_json(tmp_path / "summary.json", typ="series")
+    assert loaded["covariance_resets"] == 3 and math.isclose(loaded["wall_time_s"], 1.5)
+    bad = _valid()
+    del bad["covariance_resets"]
+    with pytest.raises(ValueError, match="'covariance_resets' is missing"):
+        validate_summary(bad)
+    bad = {**_valid(), "covariance_resets": "3"}
+    with pytest.raises(ValueError, match="'covariance_resets' must be int"):
+        validate_summary(bad)
+    with pytest.raises(ValueError, match="keys not in its schema: \\['rms_5_10s'\\]"):
+        validate_summary({**_valid(), "rms_5_10s": [0.1]})
+    with pytest.raises(ValueError, match="`kind` must be one of"):
+        validate_summary({**_valid(), "kind": "nonsense"})
+    with pytest.raises(ValueError, match="'seed' must be int\\|null"):
+        validate_summary({**_valid(), "seed": 1.5})
+
+
+def test_the_schemas_are_documented():
+    page = (pathlib.Path(__file__).parents[1] / "docs" / "outputs.md").read_text()
+    assert schema_markdown() in page  # the page's tables are generated from the schemas
+    for key in COMMON:
+        assert f"`{key}`" in page
+    for kind, keys in SUMMARIES.items():
+        assert f"`{kind}`" in page
+        for key in keys:
+            assert f"`{key}`" in page, (kind, key)
+    for name, columns in TABLES.items():
+        assert f"`{name}`" in page

@@ -1,0 +1,352 @@
+"""The outputs of the command line as documented formats: the keys of every `summary.json`
+and the columns of every table the commands write.
+
+Every `summary.json` is one JSON object, strict JSON (a non-finite number is `null`),
+numbers stored as numbers. It loads with `json.load`, and with pandas as a Series
+(`pandas.read_json(path, typ="series")`, nested objects kept as Python values) or one row
+(`pandas.json_normalize(json.load(f))`). Its key `kind` names its schema in `SUMMARIES`;
+every summary has the keys of `COMMON` (the visjax version, the settings, the seed, the wall
+time). Tables are Parquet files (and CSV where a spreadsheet is handy) with the columns of
+`TABLES`; estimated trajectories are NPZ files with the arrays of `ARRAYS`.
+
+A type is one of `str`, `int`, `float`, `bool`, `dict`, `list[str]`, `list[float]`,
+`list[int]`, `list[dict]`, `list[list[float]]`, or several joined by `|` (`float|null`: a
+number, or `null` where it is not finite or does not apply). A key ending in `?` is
+present only in some runs (the description says when).
+"""
+
+import json
+import math
+from pathlib import Path
+
+COMMON = {
+    "kind": ("str", "the schema of this summary (a key of `visjax.io.SUMMARIES`)"),
+    "visjax_version": ("str", "the visjax version that wrote it"),
+    "jax_version": ("str", "the JAX version"),
+    "created_utc": ("str", "when it was written, ISO 8601, UTC"),
+    "wall_time_s": ("float", "the command's wall time, s (compilation included)"),
+    "seed": ("int|null", "the first noise seed (`null` where nothing is random)"),
+    "settings": ("dict", "every option of the command, by its Python name"),
+}
+
+_ORDER = ("list[str]", "the order of the six components: vx, vy, vz, wx, wy, wz")
+
+SUMMARIES = {
+    "geometry": {
+        "scenes": ("int", "random planar scenes"),
+        "points": ("int", "points per scene"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "seconds": ("dict", "`visjax_compile`, `visjax` (batched) and `opencv` (loop), s"),
+        "errors": (
+            "dict",
+            "per method (`visjax`, `opencv`) and error (`H_max_abs`, `R_bar_deg`, `x_h_abs`, "
+            "`n_star_deg`, `alpha_rel`): `median` and `max` over the scenes",
+        ),
+    },
+    "velocity": {
+        "order": _ORDER,
+        "window_s": ("list[float]", "the scoring window [start, end), s (the paper's 5-10 s)"),
+        "rms_window": ("list[float]", "RMS velocity error per component over the window"),
+        "max_window": ("list[float]", "largest absolute error per component over the window"),
+        "rate_hz": ("float", "sample rate, Hz"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "duration_s": ("float", "simulated time, s"),
+        "z1_star_recovered": ("float", "the reference depth of feature 1 from the known length, m"),
+        "n_star_recovered": ("list[float]", "the plane normal measured from the frames"),
+        "K": ("list[float]", "the diagonal of the gain K (eq. (63) by default)"),
+        "rho": ("list[float]", "the diagonal of the gain rho"),
+    },
+    "velocity_data": {
+        "z1_star": ("float", "the reference depth of feature 1, m"),
+        "n_star": ("list[float]", "the plane normal measured from the frames"),
+        "result": ("str", "`successful`, or why the run stopped"),
+        "order": _ORDER,
+        "samples": ("int", "frames in the file"),
+        "dropped_frames": ("int", "frames with too few features seen, held over"),
+        "integration_step_s": ("float|null", "the Euler step (`null`: the frame times)"),
+        "K": ("list[float]", "the diagonal of K"),
+        "rho": ("list[float]", "the diagonal of rho"),
+        "rms_last_half?": ("list[float]", "with the truth: RMS error over the second half"),
+        "window_s?": ("list[float]", "with the truth: that window, s"),
+        "filter_hz?": ("float", "with `--filter-hz`: the low-pass bandwidth, Hz"),
+        "filter_delay_s?": ("float", "with `--filter-hz`: the filter's group delay, s"),
+    },
+    "structure": {
+        "duration_s": ("float", "simulated time per set, s"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "sets": (
+            "dict",
+            "per thesis set (`I.1` ... `II.3`): `rms` (x, y, z position RMS error over the "
+            "second half, m) and `thesis_rms` (Tables 5-3/5-4)",
+        ),
+    },
+    "structure_data": {
+        "result": ("str", "`successful`, or why the run stopped"),
+        "frames": ("int", "frames in the file"),
+        "dropped_frames": ("int", "frames where the point was not seen"),
+        "integration_step_s": ("float", "the observer's Euler step, s"),
+        "depth_guess_m": ("float", "the observer's initial depth guess, m"),
+        "D": ("list[float]", "the direction of the unknown input"),
+        "design": (
+            "dict",
+            "the LMI design for the file's camera motion: `method`, `alpha`, "
+            "`convergence_rate_per_s`",
+        ),
+        "unmodelled_motion": (
+            "float",
+            "the largest camera velocity outside the design's model (v_cz, w_x, w_y)",
+        ),
+        "rms_last_half?": ("list[float]", "with the truth: x, y, z RMS error, second half, m"),
+        "window_s?": ("list[float]", "with the truth: that window, s"),
+    },
+    "euclidean": {
+        "final_position_error_m": ("list[float]", "per unknown feature, at the end, m"),
+        "duration_s": ("float", "simulated time, s"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "final_camera_prediction_error_px": ("float", "largest camera prediction error, px"),
+        "covariance_resets": ("int", "covariance resets of the camera law (eq. (40))"),
+    },
+    "euclidean_data": {
+        "result": ("str", "`successful`, or why the run stopped"),
+        "frames": ("int", "frames in the file"),
+        "known_features": ("int", "features of known position"),
+        "unknown_features": ("int", "features estimated"),
+        "missing_observations": ("int", "feature-frames not seen"),
+        "integration_step_s": ("float|null", "the Euler step (`null`: the frame times)"),
+        "final_features_m": ("list[list[float]]", "the estimated features at the end, m"),
+        "camera": ("dict", "the camera estimated at the end: `A`, `R_c`, `x_c`"),
+        "final_position_error_m?": ("list[float]", "with the truth: per feature, m"),
+    },
+    "compare": {
+        "problem": ("str", "velocity, structure or euclidean"),
+        "data": ("str|null", "the data file, or `null` for the paper's scenario"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "seeds": ("int", "noise seeds"),
+        "problem_settings": ("dict", "the problem's scenario and methods"),
+        "records": ("list[dict]", "one per method and seed (the rows of `records.parquet`)"),
+    },
+    "sweep": {
+        "metric": ("str", "the metric minimised"),
+        "best": ("dict", "`params` (gain multipliers) and held-out `metric` of the best point"),
+        "paper": ("dict", "the same for the paper's gains"),
+        "problem": ("str", "the problem's name"),
+        "grid": ("str", "the grid of gain multipliers"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "seeds": ("int", "training noise seeds"),
+        "held_out_seeds": ("list[int]", "the first and last held-out seed"),
+        "best_training_metric": ("float|null", "the best point's metric on the training seeds"),
+        "best_gains": ("dict", "the best point's gains"),
+        "paper_gains": ("dict", "the paper's gains"),
+        "failed_runs": ("int", "sweep runs that did not succeed"),
+        "runs": ("int", "sweep runs"),
+        "problem_settings": ("dict", "the problem's scenario"),
+        "lmi?": ("dict", "structure problem: the LMI check of the best gains"),
+    },
+    "tune": {
+        "metric": ("str", "the metric minimised"),
+        "best": ("dict", "`params` and held-out `metric` of the tuned gains"),
+        "paper": ("dict", "the same for the paper's gains"),
+        "sweep_best": ("dict", "the same for the sweep's best point"),
+        "improvement_over_paper": ("float|null", "paper's held-out metric / tuned one"),
+        "problem": ("str", "the problem's name"),
+        "grid": ("str", "the grid of the sweep"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "seeds": ("int", "training noise seeds"),
+        "held_out_seeds": ("list[int]", "the first and last held-out seed"),
+        "steps": ("int", "optimiser steps"),
+        "optimiser": ("str", "the optimiser"),
+        "training_loss": ("dict", "`sweep_best` and `tuned` training loss"),
+        "tuned_gains": ("dict", "the tuned gains"),
+        "paper_gains": ("dict", "the paper's gains"),
+        "held_out_failed_runs": ("dict", "failed held-out runs per point"),
+        "problem_settings": ("dict", "the problem's scenario"),
+        "lmi?": ("dict", "structure problem: the LMI check of the tuned gains"),
+    },
+    "sets": {
+        "sets": ("dict", "per thesis set, the summary of its folder (its `kind` says which)"),
+    },
+    "testbed": {
+        "units": ("str", "the unit read for the velocities of the thesis' A matrices"),
+        "duration_s": ("float", "time per set, s"),
+        "sets": (
+            "dict",
+            "per set: `rms`, `thesis_rms`, `tracking_rms_px`, `rms_frames`, "
+            "`rms_ideal_pixels`, `feasible`, `reason`, `result`, `scoring` (null where the "
+            "run was infeasible)",
+        ),
+    },
+    "reproduce": {
+        "quick": ("bool", "whether `--quick` shortened the runs"),
+        "rows": (
+            "list[dict]",
+            "the summary table: `what`, `value` (a number, `null` if infeasible), `unit`, "
+            "`reference` (the paper's value or aim, as text)",
+        ),
+    },
+}
+
+TABLES = {
+    "geometry/scenes.parquet": {
+        "scene": "int",
+        "method": "str",
+        "H_max_abs": "float",
+        "R_bar_deg": "float",
+        "x_h_abs": "float",
+        "n_star_deg": "float",
+        "alpha_rel": "float",
+    },
+    "structure/sets.parquet": {
+        "set": "str",
+        "axis": "str",
+        "rms_m": "float",
+        "thesis_rms_m": "float",
+    },
+    "testbed/tables.parquet": {
+        "set": "str",
+        "table": "str",
+        "axis": "str",
+        "units": "str",
+        "rms_m": "float",
+        "rms_frames_m": "float",
+        "rms_ideal_pixels_m": "float",
+        "thesis_rms_m": "float",
+        "feasible": "bool",
+    },
+    "reproduce summary.parquet": {
+        "what": "str",
+        "value": "float",
+        "unit": "str",
+        "reference": "str",
+    },
+}
+
+ARRAYS = {
+    "velocity/estimate.npz": {
+        "t": "(N,) s",
+        "v_hat": "(N, 6) the estimate [v_e, w_e] in the camera frame, m/s and rad/s",
+        "velocity": "(N, 6) the true velocity",
+    },
+    "velocity_data estimate.npz": {
+        "t": "(M,) the integration grid, s",
+        "v_hat": "(M, 6) the estimate in the camera frame",
+        "v_object": "(M, 6) the same in the object frame (Remark 6)",
+        "v_filtered?": "(M, 6) with `--filter-hz`: the low-passed estimate",
+    },
+    "structure/estimate_<set>.npz": {
+        "t": "(N,) s",
+        "position": "(N, 3) the true point in the camera frame, m",
+        "estimate": "(N, 3) the observer's estimate, m",
+    },
+    "structure_data estimate.npz": {
+        "t": "(N,) the frame times, s",
+        "position": "(N, 3) the estimate at the frames, m",
+        "x_hat": "(N, 3) the observer's state",
+    },
+    "euclidean/estimate.npz": {
+        "t": "(M,) s",
+        "features": "(M, n, 3) the estimated unknown features, m",
+        "truth": "(n, 3) their true positions, m",
+    },
+    "euclidean_data estimate.npz": {
+        "t": "(M,) s",
+        "features": "(M, n - k, 3) the estimated features, m",
+        "A": "(M, 3, 3) the estimated intrinsics",
+        "R_c": "(M, 3, 3) the estimated camera mounting rotation",
+        "x_c": "(M, 3) the estimated camera mounting offset, m",
+    },
+}
+
+_SCALARS = {"str": str, "bool": bool, "dict": dict}
+
+
+def _is(value, spec: str) -> bool:
+    for kind in spec.split("|"):
+        if kind == "null" and value is None:
+            return True
+        if kind == "int" and isinstance(value, int) and not isinstance(value, bool):
+            return True
+        if kind == "float" and isinstance(value, (int, float)) and not isinstance(value, bool):
+            return True
+        if kind in _SCALARS and isinstance(value, _SCALARS[kind]):
+            return True
+        if kind.startswith("list[") and isinstance(value, list):
+            inner = kind[5:-1]
+            if all(_is(v, inner + ("|null" if inner == "float" else "")) for v in value):
+                return True
+    return False
+
+
+def validate_summary(summary: dict) -> dict:
+    """Check a summary against its schema (`COMMON` and `SUMMARIES[summary["kind"]]`):
+    every required key present with its type, no key the schema does not name. Returns the
+    summary; raises `ValueError` naming the first key that is wrong."""
+    if not isinstance(summary, dict):
+        raise ValueError(f"a summary is a JSON object; got {type(summary).__name__}.")
+    kind = summary.get("kind")
+    if kind not in SUMMARIES:
+        raise ValueError(f"summary `kind` must be one of {sorted(SUMMARIES)}; got {kind!r}.")
+    schema = {**COMMON, **SUMMARIES[kind]}
+    for key, (spec, _) in schema.items():
+        name = key.rstrip("?")
+        if name not in summary:
+            if key.endswith("?"):
+                continue
+            raise ValueError(f"{kind} summary: the key {name!r} is missing.")
+        if not _is(summary[name], spec):
+            raise ValueError(
+                f"{kind} summary: {name!r} must be {spec}; got {type(summary[name]).__name__} "
+                f"{summary[name]!r:.80}."
+            )
+    known = {k.rstrip("?") for k in schema}
+    extra = sorted(set(summary) - known)
+    if extra:
+        raise ValueError(f"{kind} summary: keys not in its schema: {extra}.")
+    return summary
+
+
+def finite_or_null(obj):
+    """NaN and inf as `None` (JSON `null`), NumPy scalars and arrays as Python numbers and
+    lists, throughout a nested structure."""
+    if hasattr(obj, "tolist") and not isinstance(obj, (str, bytes)):
+        obj = obj.tolist()
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [finite_or_null(v) for v in obj]
+    return obj
+
+
+def write_summary(path, summary: dict) -> dict:
+    """Validate `summary` and write it to `path` as strict JSON; returns what was written."""
+    clean = validate_summary(finite_or_null(summary))
+    Path(path).write_text(json.dumps(clean, indent=2, allow_nan=False))
+    return clean
+
+
+def read_summary(path):
+    """A `summary.json` as a `pandas.Series` (nested objects as Python values), checked
+    against its schema."""
+    import pandas as pd
+
+    validate_summary(json.loads(Path(path).read_text()))
+    return pd.read_json(path, typ="series")
+
+
+def schema_markdown() -> str:
+    """The schemas as Markdown (the page `docs/outputs.md` includes)."""
+    lines = ["## Keys of every summary", "", "| key | type | meaning |", "|---|---|---|"]
+    lines += [f"| `{k}` | `{t}` | {d} |" for k, (t, d) in COMMON.items()]
+    for kind, keys in SUMMARIES.items():
+        lines += ["", f"## `{kind}`", "", "| key | type | meaning |", "|---|---|---|"]
+        lines += [f"| `{k}` | `{t}` | {d} |" for k, (t, d) in keys.items()]
+    lines += ["", "## Tables", ""]
+    for name, cols in TABLES.items():
+        lines += [f"`{name}`: " + ", ".join(f"`{c}` ({t})" for c, t in cols.items()), ""]
+    lines += ["## Arrays", ""]
+    for name, arrays in ARRAYS.items():
+        lines += [f"`{name}`:", ""]
+        lines += [f"- `{k}`: {d}" for k, d in arrays.items()]
+        lines += [""]
+    return "\n".join(lines)
