@@ -87,7 +87,7 @@ def _public_names() -> dict[str, set[str]]:
     """Every documented object's full path, by module."""
     names = {f"visjax.{p}": _package_names(p) for p in PACKAGES}
     names.update({f"visjax.papers.{p}": _paper_names(p) for p in PAPERS})
-    names["visjax"] = {"RESULTS"}
+    names["visjax"] = {"RESULTS", "result_names"}
     return names
 
 

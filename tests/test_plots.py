@@ -437,3 +437,22 @@ def test_comparison_errors_need_a_label_with_ts():
         plots.plot_comparison(
             _records(), lambda r: r["err"], label="e [m]", errors={"a": np.zeros((2, 3))}
         )
+
+
+def test_the_style_keeps_interactive_mode_set_inside_it():
+    """pyplot turns `interactive` on when a kernel's first figure picks the inline backend;
+    the style context must not undo that (later figures would not show), but restores the
+    rest."""
+    import matplotlib
+
+    from visjax import plots
+
+    before = matplotlib.rcParams["interactive"], matplotlib.rcParams["font.size"]
+    try:
+        matplotlib.rcParams["interactive"] = False
+        with plots._style():
+            matplotlib.rcParams["interactive"] = True
+        assert matplotlib.rcParams["interactive"] is True
+        assert matplotlib.rcParams["font.size"] == before[1]
+    finally:
+        matplotlib.rcParams["interactive"] = before[0]

@@ -29,6 +29,6 @@ from . import (
     sim as sim,
     studies as studies,
 )
-from ._results import RESULTS as RESULTS
+from ._results import RESULTS as RESULTS, result_names as result_names
 
 __version__ = "0.3.0"

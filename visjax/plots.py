@@ -35,6 +35,7 @@ Conventions, shared by every `plot_*` function:
   says it.
 """
 
+import contextlib
 import pathlib
 import re
 import textwrap
@@ -127,11 +128,17 @@ def _pyplot(path):
     return plt
 
 
+@contextlib.contextmanager
 def _style():
-    """The paper style, for one figure (a context manager)."""
+    """The paper style, for one figure (a context manager). Everything it sets is restored
+    on exit except `interactive`: pyplot turns that on when the first figure of a Jupyter
+    kernel selects its inline backend, and restoring it would hide every later figure."""
     import matplotlib
 
-    return matplotlib.rc_context(_STYLE)
+    with matplotlib.rc_context(_STYLE):
+        yield
+        interactive = matplotlib.rcParams["interactive"]
+    matplotlib.rcParams["interactive"] = interactive
 
 
 def _subplots(plt, nrows, ncols, width, height, **kwargs):

@@ -136,3 +136,39 @@ def test_velocity_in_the_object_frame():
     err_cam = np.max(np.abs(v - true)[150:])
     err_obj = np.max(np.abs(v_obj - true_obj)[150:])
     np.testing.assert_allclose(err_obj, err_cam, rtol=0.5)
+
+
+def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
+    """0.1 px of noise on 2 s of frames: the plane normal measured from them is ~1.7 deg off,
+    so the default depth path (the object origin's pixel) breaks its premise check. It
+    raises by default; with `throw=False` z1* is NaN, every frame's result names the bad
+    parameter and `run` stops at the first sample, also inside `vmap`; the known length
+    between two features recovers z1* from the same frames."""
+    from visjax import RESULTS
+    from visjax.estimators import SaveAt, VelocityEstimator, run
+
+    sc = chitrakaran.section6_scenario(2.0, 1000.0)
+    keys = jax.vmap(jax.random.key)(jnp.arange(2))
+    noisy = sc.pixels + 0.1 * jax.random.normal(keys[0], sc.pixels.shape)
+    args = (sc.ts, noisy, sc.A, sc.R_star, sc.s[0])
+    with pytest.raises(RuntimeError, match="R\\* s1 = d\\* w does not hold"):
+        fixed_camera_stream(*args)
+    stream, _, z1 = fixed_camera_stream(*args, throw=False)
+    assert np.isnan(float(z1))
+    assert stream.measurement(5).result == RESULTS.invalid_intrinsics
+    est = VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63)
+    sol = run(est, stream, saveat=SaveAt(outputs=False), throw=False)
+    assert sol.result == RESULTS.nonfinite_measurement and int(sol.failed_sample) == 0
+
+    def one(key):
+        pixels = sc.pixels + 0.1 * jax.random.normal(key, sc.pixels.shape)
+        s, _, z = fixed_camera_stream(sc.ts, pixels, sc.A, sc.R_star, sc.s[0], throw=False)
+        return run(est, s, saveat=SaveAt(outputs=False), throw=False).result._value, z
+
+    codes, zs = jax.vmap(one)(keys)
+    assert np.all(np.isnan(np.asarray(zs)))
+    assert np.all(np.asarray(codes) == RESULTS.nonfinite_measurement._value)
+    # the paper's premise, a known length (features 1 and 3: the square's diagonal)
+    length = float(jnp.linalg.norm(sc.s[0] - sc.s[2]))
+    _, _, z1 = fixed_camera_stream(*args, known_length=(0, 2, length))
+    assert abs(float(z1) - float(sc.z1_star)) < 0.05

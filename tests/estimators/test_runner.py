@@ -391,3 +391,16 @@ def test_unrolled_loop_gives_the_same_run(saveat):
         np.testing.assert_allclose(grads[1], grads[0], rtol=1e-13)
     with pytest.raises(ValueError, match="`unroll` must be a positive int"):
         run(est, stream, unroll=0)
+
+
+def test_result_names_of_a_run_and_of_a_batch():
+    from visjax import result_names
+
+    est = LinearObserver(a=1.0, b=[1.0, 1.0])
+    stream = _stream(40)
+    bad = Stream(ts=stream.ts, ys=stream.ys.at[10, 0].set(jnp.nan))
+    assert result_names(run(est, bad, throw=False).result) == "nonfinite_measurement"
+    both = jax.vmap(lambda ys: run(est, Stream(ts=stream.ts, ys=ys), throw=False).result)(
+        jnp.stack([stream.ys, bad.ys])
+    )
+    assert result_names(both) == ["successful", "nonfinite_measurement"]

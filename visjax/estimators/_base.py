@@ -346,10 +346,18 @@ def _first_finite(stream):
     return all_finite(stream.measurement(0))
 
 
+@eqx.filter_jit
+def _checked(estimator):
+    """`estimator.checks()` with each condition reduced, compiled: one program instead of
+    an eager operation per line (an eigendecomposition and a dozen reductions for the
+    unknown input observer took seconds eagerly). The messages pass through as static."""
+    return tuple((jnp.all(ok), message) for ok, message in estimator.checks())
+
+
 def _precheck(estimator, stream, h_max, solver):
     """Refuse, before running, settings and steps that are concretely wrong."""
-    for ok, message in estimator.checks():
-        ok = _concrete(jnp.all(ok))
+    for ok, message in _checked(estimator):
+        ok = _concrete(ok)
         if ok is not None and not ok:
             raise ValueError(f"{type(estimator).__name__}: {message}")
     if isinstance(solver, diffrax.Euler):

@@ -198,6 +198,10 @@ def velocity_measurements(
         rec.result,
         RESULTS.where(ok, RESULTS.successful, RESULTS.singular_jacobian),
     )
+    # the reference depth is a constant of the scene: not finite or not positive (a depth
+    # recovery that failed, with throw=False) is a bad parameter, not a bad frame
+    z1_ok = jnp.isfinite(z1_star) & (z1_star > 0.0)
+    result = RESULTS.where(z1_ok, result, RESULTS.invalid_intrinsics)
     # once per frame (a barrier: XLA would recompute it into each of the 90 entries below)
     bad = jax.lax.optimization_barrier(result != RESULTS.successful)
     J, J_inv = (from_rows(M, A.dtype) for M in (J, J_inv))
@@ -215,6 +219,7 @@ def depth_from_known_length(
     s1: Float[ArrayLike, "3"],
     *,
     residual_tol: float = 1e-2,
+    throw: bool = True,
 ) -> Float[Array, ""]:
     """The reference depth $z_1^*$ of feature 1 from the known vector $s_1$ (replaces eq. (56)).
 
@@ -243,10 +248,17 @@ def depth_from_known_length(
         feature 1 in the object frame.
 
     - `residual_tol`: the largest relative residual $\\|R^* s_1 - d^* w\\| / \\|s_1\\|$ accepted
-        (noise-free it is 0; 0.1 px of noise leaves about 1e-4). Above it the premise does
-        not hold and the function raises instead of returning a wrong $z_1^*$.
+        (noise-free it is 0; 0.1 px of noise on the reference pixels leaves about 1e-4 with
+        the true $n^*$, but a normal measured from a few seconds of noisy frames can be a
+        degree or two off, which leaves a few 1e-2: then give the known length between two
+        features, `depth_from_feature_length`). Above it the premise does not hold and the
+        function raises instead of returning a wrong $z_1^*$.
+    - `throw`: with `False`, a failure returns NaN instead of raising (every frame of a
+        stream built from it then has the result `RESULTS.invalid_intrinsics`, and `run`
+        stops at its first sample).
 
-    **Returns:** $z_1^*$ (a runtime error if it is not positive or the residual is too large).
+    **Returns:** $z_1^*$ (a runtime error, or NaN, if it is not positive or the residual is
+    too large).
     """
     p1_ref, p0_ref, A, n_star, R_star, s1 = (
         as_float(x) for x in (p1_ref, p0_ref, A, n_star, R_star, s1)
@@ -266,12 +278,16 @@ def depth_from_known_length(
     # R* s1 = d* w is three equations for one unknown: their residual says whether the
     # premise holds (the origin's pixel is the image of the object origin, on the plane)
     residual = jnp.linalg.norm(Rs1 - d_star * w) / jnp.linalg.norm(Rs1)
+    premise = residual <= residual_tol
+    if not throw:
+        return jnp.where(premise & (z1 > 0.0), z1, jnp.nan)
     z1 = eqx.error_if(
         z1,
-        ~(residual <= residual_tol),
+        ~premise,
         "depth recovery: R* s1 = d* w does not hold (relative residual above `residual_tol`):"
         " `p0_ref` is not the image of the object origin on the feature plane (for"
-        " `diagonal_intersection`, the features must be a parallelogram centred on it).",
+        " `diagonal_intersection`, the features must be a parallelogram centred on it), or"
+        " n* is too coarse (from noisy frames: give `known_length` instead).",
     )
     return eqx.error_if(z1, ~(z1 > 0.0), "depth recovery gave z1* <= 0: check s1, R*, n*.")
 
@@ -281,6 +297,8 @@ def depth_from_feature_length(
     A: Float[ArrayLike, "3 3"],
     n_star: Float[ArrayLike, "3"],
     known_length: tuple,
+    *,
+    throw: bool = True,
 ) -> Float[Array, ""]:
     """The reference depth $z_1^*$ of feature 1 from one known length between two features.
 
@@ -302,6 +320,7 @@ def depth_from_feature_length(
         (`plane_normal_from_frames`, or known).
     - `known_length`: `(i, j, L)`: two feature indices (Python ints, 0 is feature 1) and
         their distance in metres (an array: gradients flow through it).
+    - `throw`: with `False`, a failure returns NaN instead of raising.
 
     **Returns:** $z_1^*$ (the sign of `n_star` does not matter: it is taken with
     $n^{*T} m_1^* > 0$, eq. (4)); a runtime error if the two features coincide in the
@@ -327,6 +346,10 @@ def depth_from_feature_length(
     u = jnp.where(u @ m[0] < 0.0, -u, u)  # the sign of eq. (4): d* = n*^T m_bar* > 0
     scaled = m / (m @ u)[:, None]  # m_k / (n^T m_k): the features at d* = 1
     gap = jnp.linalg.norm(scaled[i] - scaled[j])
+    if not throw:
+        gap_ok = gap > 0.0
+        z1 = (length / jnp.where(gap_ok, gap, 1.0)) / (u @ m[0])
+        return jnp.where(gap_ok & (z1 > 0.0), z1, jnp.nan)
     gap = eqx.error_if(
         gap,
         ~(gap > 0.0),
@@ -601,8 +624,11 @@ def fixed_camera_stream(
 
     With `throw=False` a frame that cannot be measured (a NaN pixel, degenerate points)
     is all NaN, and `run` stops there with `RESULTS.nonfinite_measurement` and its index;
-    with `throw=True` building the stream raises (one pass over the frames for their
-    result codes, `chunk` at a time).
+    a depth recovery that fails (its premise broken, or a plane normal too coarse from a
+    few seconds of noisy frames: give `known_length` then) makes $z_1^*$ NaN and every
+    frame's result `RESULTS.invalid_intrinsics`, so `run` stops at the first sample. With
+    `throw=True` building the stream raises (one pass over the frames for their result
+    codes, `chunk` at a time).
 
     With `dropouts=True` a NaN pixel is a feature out of view in that frame (the reference
     pixels must all be finite): the homography is fitted to the features seen (with more
@@ -642,11 +668,13 @@ def fixed_camera_stream(
     if n_star is None:
         n_star = plane_normal_from_frames(p_ref, pixels, A, n_prior, visible=visible)
     if z1_star is None and known_length is not None:
-        z1_star = depth_from_feature_length(p_ref, A, n_star, known_length)
+        z1_star = depth_from_feature_length(p_ref, A, n_star, known_length, throw=throw)
     if z1_star is None:
         if origin_pixel is None:
             origin_pixel = diagonal_intersection(p_ref)
-        z1_star = depth_from_known_length(p_ref[0], origin_pixel, A, n_star, R_star, s1)
+        z1_star = depth_from_known_length(
+            p_ref[0], origin_pixel, A, n_star, R_star, s1, throw=throw
+        )
     z1_star = as_float(z1_star)
     measure = FrameMeasure(
         p_ref=p_ref,
