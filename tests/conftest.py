@@ -1,11 +1,28 @@
 """Tests run in float64 with strict dtype promotion (no silent float32 -> float64)."""
 
+import atexit
+import os
+import shutil
+import tempfile
+
 import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+# Each test process caches its compiled programs on disk (its own folder, removed at exit):
+# tests that build the same program in different closures (the same scene, the same
+# estimator) then compile it once. Measured on five velocity test modules under -n 2: 261 s
+# without, 172 s with. Every process starts empty, as CI does. VISJAX_TEST_NO_CACHE=1 turns
+# it off.
+if not os.environ.get("VISJAX_TEST_NO_CACHE"):
+    _cache = tempfile.mkdtemp(prefix="visjax-test-jax-cache-")
+    atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+    jax.config.update("jax_compilation_cache_dir", _cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
 
 @pytest.fixture
