@@ -50,7 +50,7 @@ def no_jaxtyping():
 # The slowest modules (each test a minute of compiling in its own process or kernel) run
 # first, so that `pytest -n 2` fills the gaps with the short tests instead of ending on a
 # long tail in one worker.
-_FIRST = ("test_fuzz.py", "test_notebooks.py", "test_uio.py", "test_cli.py")
+_FIRST = ("test_outputs.py", "test_fuzz.py", "test_notebooks.py", "test_uio.py", "test_cli.py")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -353,3 +353,34 @@ def test_sweep_then_tune_commands(tmp_path, capsys):
     assert "held-out improvement" in capsys.readouterr().out
     for name in ("runs.parquet", "runs.csv", "history.csv", "tune.png", "sweep.png"):
         assert (tune_out / name).stat().st_size > 0
+
+
+def test_noise_seeds_give_medians_and_the_spread(tmp_path, capsys):
+    """--seeds S: S noise seeds from --seed; errors as medians with each seed's beside them,
+    the estimates with a leading seed axis (the figures draw the 10-90 % band)."""
+    out = tmp_path / "v"
+    argv = ["velocity", "--duration", "1", "--noise", "0.2", "--seeds", "2", "--seed", "3"]
+    assert main([*argv, "--quiet", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    per_seed = np.array(summary["rms_window_seeds"])
+    assert summary["seeds"] == 2 and summary["seed"] == 3 and per_seed.shape == (2, 6)
+    np.testing.assert_allclose(summary["rms_window"], per_seed.mean(0), rtol=1e-12)
+    estimate = np.load(out / "estimate.npz")
+    assert estimate["v_hat"].shape == (2, 1000, 6)
+    inside = (estimate["t"] >= 0.5) & (estimate["t"] < 1.0)
+    err = estimate["v_hat"][:, inside] - estimate["velocity"][inside]
+    np.testing.assert_allclose(np.sqrt(np.mean(err**2, axis=1)), per_seed, rtol=1e-12)
+    assert not np.allclose(per_seed[0], per_seed[1])  # two different noise draws
+    out = tmp_path / "e"
+    argv = ["euclidean", "--duration", "2", "--noise", "0.3", "--seeds", "2"]
+    assert main([*argv, "--quiet", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    errors = np.array(summary["final_position_error_m_seeds"])
+    np.testing.assert_allclose(summary["final_position_error_m"], errors.mean(0), rtol=1e-12)
+    assert np.load(out / "estimate.npz")["features"].shape[:1] == (2,)
+    # seeds need noise, and apply to the paper's simulation only
+    for bad in (["velocity", "--seeds", "2"], ["euclidean", "--seeds", "3", "--data", "x.npz"]):
+        with pytest.raises(SystemExit):
+            main(bad)
+    err = capsys.readouterr().err
+    assert "needs --noise above 0" in err and "not to --data" in err

@@ -109,7 +109,7 @@ def _run_velocity(a):
         )
     return report.velocity_report(
         a.duration, a.rate, a.noise, a.seed, a.K, a.rho, out=a.out, quiet=a.quiet,
-        formats=a.format,
+        formats=a.format, seeds=a.seeds,
     )  # fmt: skip
 
 
@@ -117,15 +117,16 @@ def _run_structure(a):
     if a.data is not None:
         return report.structure_data_report(a.data, out=a.out, quiet=a.quiet, formats=a.format)
     return report.structure_report(
-        a.set, a.duration, a.noise, a.seed, out=a.out, quiet=a.quiet, formats=a.format
-    )
+        a.set, a.duration, a.noise, a.seed, out=a.out, quiet=a.quiet, formats=a.format,
+        seeds=a.seeds,
+    )  # fmt: skip
 
 
 def _run_euclidean(a):
     if a.data is not None:
         return report.euclidean_data_report(a.data, out=a.out, quiet=a.quiet, formats=a.format)
     return report.euclidean_report(
-        a.duration, a.noise, a.seed, out=a.out, quiet=a.quiet, formats=a.format
+        a.duration, a.noise, a.seed, out=a.out, quiet=a.quiet, formats=a.format, seeds=a.seeds
     )
 
 
@@ -199,6 +200,16 @@ def _add_noise(parser, default: float) -> None:
 
 def _add_seed(parser, help: str = "the first noise seed (default 0)") -> None:
     parser.add_argument("--seed", type=_seed, default=0, help=help)
+
+
+def _add_seeds(parser) -> None:
+    parser.add_argument(
+        "--seeds",
+        type=_count,
+        default=1,
+        help="noise seeds, from --seed (default 1); with more, the errors are medians over "
+        "them and the figures show their 10-90%% band (needs --noise > 0)",
+    )
 
 
 def _add_study_options(parser, seeds: int) -> None:
@@ -341,6 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_noise(v, 0.0)
     _add_seed(v)
+    _add_seeds(v)
     v.add_argument(
         "--K", type=_six, default=_six(K_DEFAULT), help=f'diagonal of K (default "{K_DEFAULT}")'
     )
@@ -370,6 +382,7 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--duration", type=_positive, default=30.0, help="seconds per set (default 30)")
     _add_noise(st, 0.1)
     _add_seed(st)
+    _add_seeds(st)
     _add_out(st)
     _add_format(st)
     _add_data(st, _OWN_DATA)
@@ -385,6 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
     eu.add_argument("--noise-px", dest="noise", type=_nonnegative, help=argparse.SUPPRESS)
     eu.add_argument("--duration", type=_positive, default=30.0, help="seconds (default 30)")
     _add_seed(eu)
+    _add_seeds(eu)
     _add_out(eu)
     _add_format(eu)
     _add_data(eu, _OWN_DATA)
@@ -520,6 +534,11 @@ def main(argv=None) -> int:
             parser.error("--rate applies to velocity and euclidean")
         if args.data is not None and (args.duration is not None or args.rate is not None):
             parser.error("--duration and --rate apply to the paper's scenario, not to --data")
+    if args.command in ("velocity", "structure", "euclidean") and args.seeds > 1:
+        if args.data is not None:
+            parser.error("--seeds applies to the paper's simulation, not to --data")
+        if not args.noise > 0:
+            parser.error("--seeds above 1 needs --noise above 0: noise-free runs are all the same")
     if args.command == "compare" and args.data is not None and args.duration is not None:
         parser.error("--duration applies to the paper's scenario, not to --data")
     try:
@@ -538,9 +557,19 @@ def main(argv=None) -> int:
         return _execute(args)
     except (ValueError, RuntimeError) as e:
         # a bad data file or a run the estimator could not finish: one line, no traceback
-        message = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        message = _one_line(e)
         sys.stderr.write(f"visjax: error: {message}\n")
         return 1
+
+
+def _one_line(error: Exception) -> str:
+    """The message of an error in one line: for a runtime error raised inside compiled
+    code (`equinox.error_if`), its own message, not the traceback banner around it."""
+    lines = [ln.strip() for ln in str(error).strip().splitlines() if ln.strip()]
+    for line in lines:
+        if line.startswith(("equinox.EquinoxRuntimeError:", "EquinoxRuntimeError:")):
+            return line.split(":", 1)[1].strip()
+    return lines[0] if lines else type(error).__name__
 
 
 def _execute(args) -> int:

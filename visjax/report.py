@@ -41,6 +41,27 @@ def _summary(kind: str, body: dict, *, settings: dict, seed, started: float, out
     return validate_summary(finite_or_null(summary))
 
 
+def _check_seeds(seeds, noise) -> None:
+    if not (isinstance(seeds, int) and not isinstance(seeds, bool) and seeds >= 1):
+        raise ValueError(f"`seeds` must be a positive int; got {seeds!r}.")
+    if seeds > 1 and not noise > 0:
+        raise ValueError(
+            f"{seeds} seeds need pixel noise (`noise` > 0): noise-free runs are all the same."
+        )
+
+
+def _median(rows) -> list:
+    """The median over seeds (the first axis), as a list of floats."""
+    return [float(x) for x in np.median(np.asarray(rows, float), axis=0)]
+
+
+def _stack(runs):
+    """Runs (Modules of arrays) stacked on a leading seed axis, as NumPy arrays."""
+    import jax
+
+    return jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *runs)
+
+
 def _files(path, formats) -> str:
     """The figure files written for `path` in `formats`, for the printed file list."""
     return ", ".join(str(Path(path).with_suffix("." + f)) for f in formats)
@@ -178,12 +199,17 @@ def velocity_report(
     out=None,
     quiet: bool = False,
     formats=("png",),
+    seeds: int = 1,
 ) -> dict:
     """Chitrakaran et al., section 6: the velocity estimator on the paper's simulation.
     Writes `summary.json` (kind `velocity`: RMS and max error per DOF over the scoring
     window), `estimate.npz` (`t`, `v_hat`, `velocity`) and `velocity.<format>` (like the
-    paper's Fig. 2), and prints the RMS table."""
+    paper's Fig. 2), and prints the RMS table. With `seeds` > 1 (and noise), the noise seeds
+    `seed, ..., seed + seeds - 1`: the errors are their medians (each seed's in
+    `rms_window_seeds`), `v_hat` has a leading seed axis and the figure shows the median
+    error and its 10-90 % band over the seeds."""
     started = time.perf_counter()
+    _check_seeds(seeds, noise)
     _enable_x64()
     from .papers.chitrakaran import (
         DOF_NAMES,
@@ -197,9 +223,10 @@ def velocity_report(
     K = list(K_EQ63) if K is None else list(K)
     rho = list(RHO_EQ63) if rho is None else list(rho)
     settings = dict(
-        duration=duration, rate=rate, noise=noise, seed=seed, K=K, rho=rho, formats=list(formats)
-    )
-    stages = _progress(4, "velocity", quiet)
+        duration=duration, rate=rate, noise=noise, seed=seed, seeds=seeds, K=K, rho=rho,
+        formats=list(formats),
+    )  # fmt: skip
+    stages = _progress(3 + seeds, "velocity", quiet)
     started_stages = []
 
     def progress(stage):
@@ -208,9 +235,29 @@ def velocity_report(
         started_stages.append(stage)
         stages.set_postfix_str(stage)
 
-    r = velocity_experiment(duration, rate, noise, K=K, rho=rho, seed=seed, progress=progress)
-    body = summarise(r, duration, rate, noise)
+    runs = []
+    for i in range(seeds):
+        if i:
+            progress(f"seed {seed + i}")
+        runs.append(
+            velocity_experiment(
+                duration, rate, noise, K=K, rho=rho, seed=seed + i, progress=None if i else progress
+            )
+        )
+    per_seed = [summarise(r, duration, rate, noise) for r in runs]
+    body = dict(per_seed[0])
+    if seeds > 1:
+        body["seeds"] = seeds
+        for key in ("rms_window", "max_window"):
+            body[key] = _median([p[key] for p in per_seed])
+        body["rms_window_seeds"] = [p["rms_window"] for p in per_seed]
+        body["z1_star_recovered_seeds"] = [p["z1_star_recovered"] for p in per_seed]
+        body["z1_star_recovered"] = float(np.median(body["z1_star_recovered_seeds"]))
+        n_mean = np.mean([p["n_star_recovered"] for p in per_seed], axis=0)
+        body["n_star_recovered"] = [float(x) for x in n_mean / np.linalg.norm(n_mean)]
     body["K"], body["rho"] = [float(k) for k in K], [float(x) for x in rho]
+    r = runs[0]
+    estimate = np.asarray(r.estimate) if seeds == 1 else np.stack([x.estimate for x in runs])
     progress("figure")
     if out is not None:
         out = Path(out)
@@ -218,15 +265,15 @@ def velocity_report(
         np.savez(
             out / "estimate.npz",
             t=np.asarray(r.ts),
-            v_hat=np.asarray(r.estimate),
+            v_hat=estimate,
             velocity=np.asarray(r.velocity),
         )
         title = (
             f"velocity estimator (Chitrakaran et al.), section 6: {rate:g} Hz, {duration:g} s, "
-            f"pixel noise {noise:g} px"
+            f"pixel noise {noise:g} px" + (f", {seeds} seeds" if seeds > 1 else "")
         )
         plot_velocity(
-            r.ts, r.velocity, r.estimate, title=title, path=out / "velocity.png", formats=formats
+            r.ts, r.velocity, estimate, title=title, path=out / "velocity.png", formats=formats
         )
     stages.update()
     stages.close()
@@ -244,6 +291,8 @@ def velocity_report(
         "Velocity estimator (Chitrakaran et al., eqs. 39-40), section-6 simulation: "
         f"{duration:g} s at {rate:g} Hz, pixel noise {noise:g} px"
     )
+    if seeds > 1:
+        print(f"medians over {seeds} noise seeds ({seed} to {seed + seeds - 1})")
     print(f"recovered z1* = {summary['z1_star_recovered']:.6f} m")
     print(f"{'DOF':<6}{f'RMS {a:g}-{b:g} s':>16}{f'max {a:g}-{b:g} s':>16}")
     for name, rms, mx in zip(DOF_NAMES, summary["rms_window"], summary["max_window"]):
@@ -518,16 +567,22 @@ def structure_report(
     out=None,
     quiet: bool = False,
     formats=("png",),
+    seeds: int = 1,
 ) -> dict:
     """Jang's thesis: the UIO on the simulated analogues of the seven experiment sets.
     Writes `summary.json` (kind `structure`: per set the RMS position error beside the
     thesis' Tables 5-3/5-4), `sets.parquet` (one row per set and axis), per set
     `estimate_<set>.npz` (`t`, `position`, `estimate`), `structure_<set>.<format>` (like
     Figs. 5-7/5-8) and `camera_velocity_<set>.<format>` (like Figs. 5-5/5-6), and prints the
-    tables."""
+    tables. With `seeds` > 1, the noise seeds `seed, ..., seed + seeds - 1`: each set's `rms`
+    is their median (each seed's in `rms_seeds`), `estimate` has a leading seed axis and the
+    figures show the median error and its 10-90 % band."""
     started = time.perf_counter()
+    _check_seeds(seeds, noise)
     names = _thesis_set_names(sets)
-    settings = dict(sets=names, duration=duration, noise=noise, seed=seed, formats=list(formats))
+    settings = dict(
+        sets=names, duration=duration, noise=noise, seed=seed, seeds=seeds, formats=list(formats)
+    )
     _enable_x64()
     from tqdm import tqdm
 
@@ -539,23 +594,26 @@ def structure_report(
         out.mkdir(parents=True, exist_ok=True)
     per_set = {}
     for name in tqdm(names, desc="structure", unit="set", disable=quiet):
-        r = structure_experiment(name, duration, noise, seed=seed)
-        per_set[name] = {
-            "rms": [float(x) for x in r.rms],
-            "thesis_rms": list(SETS[name].thesis_rms),
-        }
+        runs = [structure_experiment(name, duration, noise, seed=seed + i) for i in range(seeds)]
+        r = runs[0]
+        rms = [[float(x) for x in run.rms] for run in runs]
+        per_set[name] = {"rms": rms[0] if seeds == 1 else _median(rms)}
+        if seeds > 1:
+            per_set[name]["rms_seeds"] = rms
+        per_set[name]["thesis_rms"] = list(SETS[name].thesis_rms)
+        estimate = np.asarray(r.estimate) if seeds == 1 else np.stack([x.estimate for x in runs])
         if out is not None:
             kind = "moving" if SETS[name].moving else "static"
             np.savez(
                 out / f"estimate_{name}.npz",
                 t=np.asarray(r.ts),
                 position=np.asarray(r.position),
-                estimate=np.asarray(r.estimate),
+                estimate=estimate,
             )
             plot_structure(
                 r.ts,
                 r.position,
-                r.estimate,
+                estimate,
                 path=out / f"structure_{name}.png",
                 formats=formats,
                 title=f"unknown input observer (Jang's thesis), set {name} ({kind} point), "
@@ -569,6 +627,8 @@ def structure_report(
                 title=f"Jang's thesis, set {name}: camera velocity (simulated analogue)",
             )
     body = {"duration_s": duration, "noise_px": noise, "sets": per_set}
+    if seeds > 1:
+        body["seeds"] = seeds
     if out is not None:
         import pandas as pd
 
@@ -700,44 +760,58 @@ def euclidean_report(
     out=None,
     quiet: bool = False,
     formats=("png",),
+    seeds: int = 1,
 ) -> dict:
     """Nath et al.: the adaptive least-squares structure estimator on its simulation.
     Writes `summary.json` (kind `euclidean`: the final position errors), `estimate.npz`
-    (`t`, `features` over time, `truth`) and `euclidean.<format>`."""
+    (`t`, `features` over time, `truth`) and `euclidean.<format>`. With `seeds` > 1, the
+    noise seeds `seed, ..., seed + seeds - 1`: the errors are their medians (each seed's in
+    `final_position_error_m_seeds`), `features` has a leading seed axis and the figure shows
+    the medians and their 10-90 % bands."""
     started = time.perf_counter()
-    settings = dict(duration=duration, noise=noise, seed=seed, formats=list(formats))
+    _check_seeds(seeds, noise)
+    settings = dict(duration=duration, noise=noise, seed=seed, seeds=seeds, formats=list(formats))
     _enable_x64()
     from .papers.nath import euclidean_experiment, final_errors
     from .plots import plot_euclidean
 
-    stages = _progress(2, "euclidean", quiet)
+    stages = _progress(1 + seeds, "euclidean", quiet)
     stages.set_postfix_str("simulate and estimate (compiles once)")
-    r = euclidean_experiment(duration, noise, seed=seed)
-    stages.update()
-    errors = final_errors(r)
+    runs = []
+    for i in range(seeds):
+        runs.append(euclidean_experiment(duration, noise, seed=seed + i))
+        stages.update()
+    r = runs[0] if seeds == 1 else _stack(runs)
+    per_seed = [[float(e) for e in final_errors(x)] for x in runs]
+    errors = per_seed[0] if seeds == 1 else _median(per_seed)
     body = {
-        "final_position_error_m": [float(e) for e in errors],
+        "final_position_error_m": errors,
         "duration_s": duration,
         "noise_px": noise,
-        "final_camera_prediction_error_px": float(np.asarray(r.p_tilde_c[-1]).max()),
-        "covariance_resets": int(r.resets[-1]),
+        "final_camera_prediction_error_px": float(
+            np.median([np.asarray(x.p_tilde_c[-1]).max() for x in runs])
+        ),
+        "covariance_resets": int(np.median([int(x.resets[-1]) for x in runs])),
     }
+    if seeds > 1:
+        body["seeds"] = seeds
+        body["final_position_error_m_seeds"] = per_seed
     stages.set_postfix_str("figure")
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         np.savez(
             out / "estimate.npz",
-            t=np.asarray(r.ts),
+            t=np.asarray(runs[0].ts),
             features=np.asarray(r.omega_s),
-            truth=np.asarray(r.omega_true),
+            truth=np.asarray(runs[0].omega_true),
         )
         plot_euclidean(
             r,
             path=out / "euclidean.png",
             formats=formats,
             title=f"adaptive least-squares structure estimator (Nath et al.): {duration:g} s "
-            f"at 1 kHz, pixel noise {noise:g} px",
+            f"at 1 kHz, pixel noise {noise:g} px" + (f", {seeds} seeds" if seeds > 1 else ""),
         )
     stages.update()
     stages.close()
@@ -752,6 +826,7 @@ def euclidean_report(
     print(
         "Adaptive least-squares structure estimator (Nath et al., eqs. 37-51): "
         f"{duration:g} s at 1 kHz, pixel noise {noise:g} px, uncalibrated camera"
+        + (f"; medians over {seeds} noise seeds" if seeds > 1 else "")
     )
     for i, e in enumerate(errors):
         print(f"feature {i + 1}: final position error {e * 1000:8.3f} mm")

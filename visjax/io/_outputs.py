@@ -55,6 +55,9 @@ SUMMARIES = {
         "n_star_recovered": ("list[float]", "the plane normal measured from the frames"),
         "K": ("list[float]", "the diagonal of the gain K (eq. (63) by default)"),
         "rho": ("list[float]", "the diagonal of the gain rho"),
+        "seeds?": ("int", "with `--seeds` > 1: the noise seeds; the errors are medians"),
+        "rms_window_seeds?": ("list[list[float]]", "with `--seeds` > 1: each seed's RMS"),
+        "z1_star_recovered_seeds?": ("list[float]", "with `--seeds` > 1: each seed's z1*"),
     },
     "velocity_data": {
         "z1_star": ("float", "the reference depth of feature 1, m"),
@@ -77,8 +80,10 @@ SUMMARIES = {
         "sets": (
             "dict",
             "per thesis set (`I.1` ... `II.3`): `rms` (x, y, z position RMS error over the "
-            "second half, m) and `thesis_rms` (Tables 5-3/5-4)",
+            "second half, m; with `--seeds` > 1 the median, each seed's in `rms_seeds`) and "
+            "`thesis_rms` (Tables 5-3/5-4)",
         ),
+        "seeds?": ("int", "with `--seeds` > 1: the noise seeds"),
     },
     "structure_data": {
         "result": ("str", "`successful`, or why the run stopped"),
@@ -105,6 +110,11 @@ SUMMARIES = {
         "noise_px": ("float", "pixel noise sigma, px"),
         "final_camera_prediction_error_px": ("float", "largest camera prediction error, px"),
         "covariance_resets": ("int", "covariance resets of the camera law (eq. (40))"),
+        "seeds?": ("int", "with `--seeds` > 1: the noise seeds; the errors are medians"),
+        "final_position_error_m_seeds?": (
+            "list[list[float]]",
+            "with `--seeds` > 1: each seed's final errors",
+        ),
     },
     "euclidean_data": {
         "result": ("str", "`successful`, or why the run stopped"),
@@ -223,7 +233,8 @@ TABLES = {
 ARRAYS = {
     "velocity/estimate.npz": {
         "t": "(N,) s",
-        "v_hat": "(N, 6) the estimate [v_e, w_e] in the camera frame, m/s and rad/s",
+        "v_hat": "(N, 6) the estimate [v_e, w_e] in the camera frame, m/s and rad/s; "
+        "(S, N, 6) with `--seeds` S",
         "velocity": "(N, 6) the true velocity",
     },
     "velocity_data estimate.npz": {
@@ -235,7 +246,7 @@ ARRAYS = {
     "structure/estimate_<set>.npz": {
         "t": "(N,) s",
         "position": "(N, 3) the true point in the camera frame, m",
-        "estimate": "(N, 3) the observer's estimate, m",
+        "estimate": "(N, 3) the observer's estimate, m; (S, N, 3) with `--seeds` S",
     },
     "structure_data estimate.npz": {
         "t": "(N,) the frame times, s",
@@ -244,7 +255,7 @@ ARRAYS = {
     },
     "euclidean/estimate.npz": {
         "t": "(M,) s",
-        "features": "(M, n, 3) the estimated unknown features, m",
+        "features": "(M, n, 3) the estimated unknown features, m; (S, M, n, 3) with `--seeds` S",
         "truth": "(n, 3) their true positions, m",
     },
     "euclidean_data estimate.npz": {

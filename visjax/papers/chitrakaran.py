@@ -183,7 +183,13 @@ def velocity_experiment(
     key = jax.random.key(seed) if noise_px > 0 else None
     sc = section6_scenario(duration, rate_hz, noise_px=noise_px, key=key)
     progress("reconstruct every frame")
-    stream, n_star, z1_star = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0])
+    # z1* from one known length between two features, the paper's premise (section 5):
+    # features 1 and 3, the square's diagonal (with noisy frames the plane normal is too
+    # coarse for the object-origin path, `depth_from_known_length`)
+    length = jnp.linalg.norm(sc.s[0] - sc.s[2])
+    stream, n_star, z1_star = fixed_camera_stream(
+        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], known_length=(0, 2, length)
+    )
     progress("estimate")
     sol = run(VelocityEstimator(K=K, rho=rho), stream)
     return VelocityRun(
