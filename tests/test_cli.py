@@ -6,13 +6,19 @@ import pytest
 
 import visjax
 from visjax.cli import build_parser, main
+from visjax.io import read_summary
+
+
+def _summary(folder) -> dict:
+    """A command's summary.json, loaded with pandas and checked against its schema."""
+    return read_summary(Path(folder) / "summary.json").to_dict()
 
 
 def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
     assert main(["geometry", "--scenes", "5", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "visjax median" in printed and "OpenCV median" in printed
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = _summary(tmp_path)
     err = summary["errors"]
     # noise-free: visjax recovers ground truth to float64 precision, OpenCV to its float32
     # point conversion
@@ -95,7 +101,7 @@ def test_velocity_command(tmp_path, capsys):
     assert main(["velocity", "--duration", "1", "--quiet", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "RMS" in printed and "vz" in printed
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = _summary(tmp_path)
     for key in ("rms_window", "max_window"):
         assert len(summary[key]) == 6
     assert summary["window_s"] == [0.5, 1.0]  # the paper's 5-10 s, shrunk into 1 s
@@ -136,7 +142,7 @@ def test_structure_command(tmp_path, capsys):
     )
     printed = capsys.readouterr().out
     assert "Table 5-3" in printed and "Table 5-4" in printed
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = _summary(tmp_path)
     assert set(summary["sets"]) == {"I.1", "II.2"} and summary["seed"] == 0
     assert len(summary["sets"]["II.2"]["rms"]) == 3
     assert max(summary["sets"]["I.1"]["rms"]) < 0.05  # metres, static point, 0.1 px
@@ -149,7 +155,7 @@ def test_euclidean_command(tmp_path, capsys):
     argv = ["euclidean", "--duration", "3", "--quiet", "--format", "svg,pdf"]
     assert main([*argv, "--out", str(tmp_path)]) == 0
     assert "final position error" in capsys.readouterr().out
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = _summary(tmp_path)
     assert len(summary["final_position_error_m"]) == 4
     assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 3 s in
     # vector figures only, as asked; the estimate over time beside its truth
@@ -237,7 +243,7 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
     path = data.save(tmp_path / "v.npz")
     out = tmp_path / "out"
     assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _summary(out)
     z1_true = 1.5 + (data.R_star @ data.s1)[2]  # the plate starts at x0 = [0.05, -0.03, 1.5]
     assert abs(summary["z1_star"] - z1_true) < 1e-9
     assert len(summary["rms_last_half"]) == 6
@@ -273,7 +279,7 @@ def test_structure_and_euclidean_on_data_files(tmp_path, capsys):
     path = structure_example(duration=6.0, noise_px=0.0).save(tmp_path / "s.npz")
     out = tmp_path / "s"
     assert main(["structure", "--data", str(path), "--quiet", "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _summary(out)
     assert summary["result"] == "successful" and len(summary["rms_last_half"]) == 3
     # depth guess 4 m for a target 2.5 m away; 3-6 s: within 1 cm (4 mm measured)
     assert max(summary["rms_last_half"]) < 0.01
@@ -282,7 +288,7 @@ def test_structure_and_euclidean_on_data_files(tmp_path, capsys):
     path = euclidean_example(duration=10.0, noise_px=0.0).save(tmp_path / "e.npz")
     out = tmp_path / "e"
     assert main(["euclidean", "--data", str(path), "--quiet", "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _summary(out)
     assert summary["missing_observations"] > 0  # 2% of the features drop out
     errors = np.asarray(summary["final_position_error_m"])
     # 10 s of a 40 s convergence: from 0.1-0.5 m to a few cm, each at least halved
@@ -299,7 +305,7 @@ def test_compare_command_writes_records_that_load(tmp_path, capsys):
     out = tmp_path / "cmp"
     argv = ["compare", "structure", "--duration", "4", "--seeds", "2", "--noise", "0.5"]
     assert main(argv + ["--quiet", "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _summary(out)
     table = pd.DataFrame(summary["records"])
     assert len(table) == 8 and set(table["seed"]) == {0, 1}
     assert set(table["method"]) == {"estimator", "batch", "batch_window", "ekf"}
@@ -336,6 +342,7 @@ def test_sweep_then_tune_commands(tmp_path, capsys):
     assert set(bad["result"]) == {"unstable_step"} and bad["rms_worst"].isna().all()
     # strict JSON (no NaN): loads with any parser
     summary = json.loads((sweep_out / "summary.json").read_text(), parse_constant=pytest.fail)
+    assert read_summary(sweep_out / "summary.json")["kind"] == "sweep"
     assert summary["metric"] == "rms_worst"
     assert summary["best"]["params"] == {"K": 0.01, "rho": 0.1}
     assert summary["paper"]["params"] == {"K": 1.0, "rho": 1.0}
@@ -346,6 +353,7 @@ def test_sweep_then_tune_commands(tmp_path, capsys):
 
     assert main(["tune", *common, "--steps", "5", "--quiet", "--out", str(tune_out)]) == 0
     summary = json.loads((tune_out / "summary.json").read_text(), parse_constant=pytest.fail)
+    assert read_summary(tune_out / "summary.json")["kind"] == "tune"
     assert set(summary) >= {"metric", "best", "paper", "sweep_best"}
     assert summary["best"]["metric"] * 10 < summary["paper"]["metric"]
     # the tuned point is no worse on the training seeds than the sweep's best it started at
@@ -361,7 +369,7 @@ def test_noise_seeds_give_medians_and_the_spread(tmp_path, capsys):
     out = tmp_path / "v"
     argv = ["velocity", "--duration", "1", "--noise", "0.2", "--seeds", "2", "--seed", "3"]
     assert main([*argv, "--quiet", "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _summary(out)
     per_seed = np.array(summary["rms_window_seeds"])
     assert summary["seeds"] == 2 and summary["seed"] == 3 and per_seed.shape == (2, 6)
     np.testing.assert_allclose(summary["rms_window"], per_seed.mean(0), rtol=1e-12)
@@ -374,7 +382,7 @@ def test_noise_seeds_give_medians_and_the_spread(tmp_path, capsys):
     out = tmp_path / "e"
     argv = ["euclidean", "--duration", "2", "--noise", "0.3", "--seeds", "2"]
     assert main([*argv, "--quiet", "--out", str(out)]) == 0
-    summary = json.loads((out / "summary.json").read_text())
+    summary = _summary(out)
     errors = np.array(summary["final_position_error_m_seeds"])
     np.testing.assert_allclose(summary["final_position_error_m"], errors.mean(0), rtol=1e-12)
     assert np.load(out / "estimate.npz")["features"].shape[:1] == (2,)
