@@ -53,6 +53,16 @@ def test_jit_vmap_grad():
     # z1* is linear in L: dz1*/dL = z1*/L exactly
     g = jax.grad(lambda l: depth_from_feature_length(P[0], A[0], N[0], (1, 3, l)))(L[0])
     np.testing.assert_allclose(g, scenes[0][0][0, 2] / L[0], rtol=1e-9)
+    # throw=False: the same values and gradient where it succeeds, NaN (no error) where not
+    quiet = jax.jit(
+        jax.vmap(lambda p, a, n, l: depth_from_feature_length(p, a, n, (1, 3, l), throw=False))
+    )
+    np.testing.assert_allclose(quiet(P, A, N, L), f(P, A, N, L), rtol=1e-15)
+    assert np.all(np.isnan(np.asarray(quiet(P, A, N, -L))))  # L <= 0: z1* <= 0
+    g_quiet = jax.grad(
+        lambda l: depth_from_feature_length(P[0], A[0], N[0], (1, 3, l), throw=False)
+    )(L[0])
+    np.testing.assert_allclose(g_quiet, g, rtol=1e-15)
 
 
 def test_bad_known_length(no_jaxtyping):

@@ -25,6 +25,21 @@ def test_depth_and_diagonal_jit_vmap_grad():
     for i, p in enumerate(sc.pixels[::50]):
         np.testing.assert_allclose(batched[i], diagonal_intersection(p), rtol=1e-14)
 
+    # throw=False: the same value and gradient where the premise holds; NaN where not (an
+    # origin pixel off the object origin), under vmap, no error
+    def quiet(p_ref, shift):
+        p0 = diagonal_intersection(p_ref) + shift
+        return depth_from_known_length(
+            p_ref[0], p0, sc.A, sc.n_star, sc.R_star, sc.s[0], throw=False
+        )
+
+    zero = np.zeros(2)
+    np.testing.assert_allclose(jax.grad(quiet)(p_ref, zero), g, rtol=1e-12, atol=1e-15)
+    shifts = np.array([[0.0, 0.0], [40.0, -25.0]])
+    z = jax.jit(jax.vmap(quiet, (None, 0)))(p_ref, shifts)
+    np.testing.assert_allclose(z[0], sc.z1_star, rtol=1e-10)
+    assert np.isnan(float(z[1]))
+
 
 def test_kinematics_jacobian_grad():
     A = jnp.array([[1268.16, 0.0, 257.49], [0.0, 1267.50, 253.10], [0.0, 0.0, 1.0]])
