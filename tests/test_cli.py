@@ -152,20 +152,25 @@ def test_structure_command(tmp_path, capsys):
 
 
 def test_euclidean_command(tmp_path, capsys):
-    argv = ["euclidean", "--duration", "3", "--quiet", "--format", "svg,pdf"]
-    assert main([*argv, "--out", str(tmp_path)]) == 0
+    """Two noise seeds, vector figures only: the final errors are the seeds' medians (of two:
+    their mean), each seed's beside them, and the estimates over time have a seed axis."""
+    argv = ["euclidean", "--duration", "3", "--noise", "0.3", "--seeds", "2"]
+    assert main([*argv, "--quiet", "--format", "svg,pdf", "--out", str(tmp_path)]) == 0
     assert "final position error" in capsys.readouterr().out
     summary = _summary(tmp_path)
-    assert len(summary["final_position_error_m"]) == 4
+    assert len(summary["final_position_error_m"]) == 4 and summary["seeds"] == 2
     assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 3 s in
-    # vector figures only, as asked; the estimate over time beside its truth
+    per_seed = np.array(summary["final_position_error_m_seeds"])
+    np.testing.assert_allclose(summary["final_position_error_m"], per_seed.mean(0), rtol=1e-12)
+    # vector figures only, as asked; the estimates over time beside the truth
     assert (tmp_path / "euclidean.svg").read_bytes()[:5] == b"<?xml"
     assert (tmp_path / "euclidean.pdf").read_bytes()[:4] == b"%PDF"
     assert not (tmp_path / "euclidean.png").exists()
     estimate = np.load(tmp_path / "estimate.npz")
-    assert estimate["features"].shape[1:] == estimate["truth"].shape == (4, 3)
-    final = np.linalg.norm(estimate["features"][-1] - estimate["truth"], axis=-1)
-    np.testing.assert_allclose(final, summary["final_position_error_m"], rtol=1e-12)
+    assert estimate["features"].shape[0] == 2
+    assert estimate["features"].shape[2:] == estimate["truth"].shape == (4, 3)
+    final = np.linalg.norm(estimate["features"][:, -1] - estimate["truth"], axis=-1)
+    np.testing.assert_allclose(final, per_seed, rtol=1e-12)
 
 
 def test_one_option_vocabulary_and_version(capsys):
@@ -379,13 +384,6 @@ def test_noise_seeds_give_medians_and_the_spread(tmp_path, capsys):
     err = estimate["v_hat"][:, inside] - estimate["velocity"][inside]
     np.testing.assert_allclose(np.sqrt(np.mean(err**2, axis=1)), per_seed, rtol=1e-12)
     assert not np.allclose(per_seed[0], per_seed[1])  # two different noise draws
-    out = tmp_path / "e"
-    argv = ["euclidean", "--duration", "2", "--noise", "0.3", "--seeds", "2"]
-    assert main([*argv, "--quiet", "--out", str(out)]) == 0
-    summary = _summary(out)
-    errors = np.array(summary["final_position_error_m_seeds"])
-    np.testing.assert_allclose(summary["final_position_error_m"], errors.mean(0), rtol=1e-12)
-    assert np.load(out / "estimate.npz")["features"].shape[:1] == (2,)
     # seeds need noise, and apply to the paper's simulation only
     for bad in (["velocity", "--seeds", "2"], ["euclidean", "--seeds", "3", "--data", "x.npz"]):
         with pytest.raises(SystemExit):
