@@ -70,18 +70,6 @@ def error_signal(
     return jnp.concatenate([e_v, so3_log(R_bar)])
 
 
-def _L_v(m1):
-    """$L_v$ of eq. (23) from the normalized coordinates $[x_1/z_1, y_1/z_1]$."""
-    dtype = m1.dtype
-    return _unit_upper(-m1[0], -m1[1], dtype)
-
-
-def _unit_upper(a, b, dtype):
-    """[[1, 0, a], [0, 1, b], [0, 0, 1]] by a stack (a scatter per frame is slow)."""
-    o, z = jnp.ones((), dtype), jnp.zeros((), dtype)
-    return jnp.stack([jnp.stack([o, z, a]), jnp.stack([z, o, b]), jnp.stack([z, z, o])])
-
-
 def kinematics_jacobian(
     A: Float[ArrayLike, "3 3"],
     m1: Float[ArrayLike, "2"],
