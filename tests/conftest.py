@@ -8,6 +8,11 @@ import tempfile
 import jax
 import pytest
 
+import visjax
+
+# the XLA options the command line also sets (the library sets none on import), before any
+# JAX computation: subprocesses started by the tests inherit them
+visjax.apply_xla_cpu_workarounds()
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")

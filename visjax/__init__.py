@@ -1,10 +1,10 @@
 """visjax: JAX-accelerated, differentiable vision-based nonlinear estimators.
 
-The library never changes JAX's global configuration. Enable float64 yourself
-(`jax.config.update("jax_enable_x64", True)`) for the papers' accuracy; the geometry also
-runs in float32. One exception: XLA options set on import (a scheduler option that avoids
-a deadlock of XLA's CPU runtime, and on jaxlib 0.10 the older loop emitter, which compiles
-faster): see `_xla_workaround`.
+Importing visjax changes no global state of the process: no environment variable, no JAX
+config. Enable float64 yourself (`jax.config.update("jax_enable_x64", True)`) for the
+papers' accuracy; the geometry also runs in float32. For large batches on a CPU, call
+`visjax.apply_xla_cpu_workarounds()` before any JAX computation (XLA options that avoid a
+hang of XLA's CPU runtime with jaxlib 0.10 and compile faster); the command line does.
 
 Subpackages, from the bottom layer up: `geometry` (camera, SO(3), homography,
 decomposition, calibration, the uncalibrated-camera model), `kinematics` (rigid-body motion,
@@ -17,7 +17,6 @@ numbers, scenario and experiment), `studies` (generic studies), and the modules 
 """
 
 from . import (
-    _xla_workaround,  # noqa: F401  (first: before any JAX backend starts)
     baselines as baselines,
     design as design,
     estimators as estimators,
@@ -30,5 +29,9 @@ from . import (
     studies as studies,
 )
 from ._results import RESULTS as RESULTS, result_names as result_names
+from ._xla_workaround import (
+    apply_xla_cpu_workarounds as apply_xla_cpu_workarounds,
+    xla_cpu_options as xla_cpu_options,
+)
 
 __version__ = "0.3.0"

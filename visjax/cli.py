@@ -512,6 +512,9 @@ def main(argv=None) -> int:
     """Parse and validate every option before any work (one line and exit status 2 on a
     bad one), then run the command into a temporary folder beside `--out` and move its
     files into place only when it succeeded: a failure leaves nothing half-written."""
+    from ._xla_workaround import apply_xla_cpu_workarounds
+
+    apply_xla_cpu_workarounds()  # the command line's own choice; `import visjax` sets nothing
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command in ("structure", "sweep", "tune") and args.set:

@@ -18,6 +18,7 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
 from .._results import RESULTS, all_finite
+from .._xla_workaround import warn_if_hang_prone
 
 
 def log_axis(low: float | int, high: float | int, num: int) -> np.ndarray:
@@ -194,6 +195,8 @@ def sweep(
     n_runs = n_points * n_seeds
     n_chunks = math.ceil(n_runs / chunk)
 
+    if chunk > 1:
+        warn_if_hang_prone()
     compiled = _compiled(factory, metrics, treedef, mesh)
     if mesh is None:
 
