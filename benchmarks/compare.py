@@ -3,7 +3,7 @@
 0.1 and 0.5 px of pixel noise, over a few noise seeds, the accuracy (the estimator's own
 summary keys) and the latency per new sample (median over timed runs, after compilation)
 of every method. The settings of every method are fixed in advance and printed with the
-results (no value chosen to match anything). Prints JSON (README, "Baselines").
+results (no value chosen to match anything). Prints JSON (docs/baselines.md).
 
     python benchmarks/compare.py [--seeds 3] [--problems velocity structure euclidean]
 """

@@ -1,17 +1,16 @@
-"""Run the performance benchmarks, write their JSON into one file, and regenerate the
-README's performance table from it.
+"""Run the performance benchmarks and regenerate the performance table of the docs.
 
 Each benchmark runs in its own process (its memory and compile times its own) and prints
 one JSON document; this collects them under their names in `--out` (default
 `benchmarks/results.json`), with the machine and versions, and then rewrites the table
 between the markers `<!-- performance-table:start -->` and `<!-- performance-table:end -->`
-in README.md from that file alone (`--table-only` redoes the table from an existing file
-without running anything).
+in docs/performance.md from that file alone (`--table-only` redoes the table from an
+existing file without running anything; `--no-table` leaves the page alone).
 
-    python benchmarks/run_all.py [--quick] [--only NAME ...] [--table-only]
+    python benchmarks/run_all.py [--quick] [--only NAME ...] [--table-only] [--no-table]
 
 `--quick` runs every benchmark on small sizes (a smoke test of the scripts, minutes);
-the README's numbers come from a full run.
+the documented numbers come from a full run.
 """
 
 import argparse
@@ -24,7 +23,7 @@ import subprocess
 import sys
 
 HERE = pathlib.Path(__file__).parent
-README = HERE.parent / "README.md"
+PERFORMANCE_PAGE = HERE.parent / "docs" / "performance.md"
 START, END = "<!-- performance-table:start -->", "<!-- performance-table:end -->"
 
 # name: (script, full arguments, quick arguments)
@@ -71,7 +70,7 @@ def _met(ok):
 
 
 def table(results: dict) -> str:
-    """The README's performance table (Markdown) from the collected results."""
+    """The performance table (Markdown) of docs/performance.md from the collected results."""
     r = results["benchmarks"]
     rows = []
     h = r.get("homography_decomposition", {})
@@ -209,22 +208,40 @@ def table(results: dict) -> str:
     return "\n".join(lines)
 
 
-def write_table(results: dict, readme: pathlib.Path = README) -> None:
-    text = readme.read_text()
+def write_table(results: dict, page: pathlib.Path = PERFORMANCE_PAGE) -> None:
+    """Replace the table between the markers of `page` with `table(results)`."""
+    text = page.read_text()
     if START not in text or END not in text:
-        raise SystemExit(f"{readme} has no {START} ... {END} markers.")
+        raise SystemExit(f"{page} has no {START} ... {END} markers.")
     head, rest = text.split(START, 1)
     _, tail = rest.split(END, 1)
-    readme.write_text(f"{head}{START}\n{table(results)}\n{END}{tail}")
+    page.write_text(f"{head}{START}\n{table(results)}\n{END}{tail}")
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=pathlib.Path, default=HERE / "results.json")
-    parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--only", nargs="*", choices=list(BENCHMARKS))
-    parser.add_argument("--table-only", action="store_true")
-    parser.add_argument("--no-readme", action="store_true")
+    parser.add_argument(
+        "--out",
+        type=pathlib.Path,
+        default=HERE / "results.json",
+        help="the collected JSON (default benchmarks/results.json)",
+    )
+    parser.add_argument("--quick", action="store_true", help="small sizes: a smoke test")
+    parser.add_argument(
+        "--only", nargs="*", choices=list(BENCHMARKS), help="run these only, keep the others'"
+    )
+    parser.add_argument(
+        "--table-only",
+        action="store_true",
+        help="run nothing: regenerate the table of docs/performance.md from --out",
+    )
+    parser.add_argument(
+        "--no-table",
+        "--no-readme",
+        dest="no_table",
+        action="store_true",
+        help="leave docs/performance.md alone (--no-readme: the former name)",
+    )
     args = parser.parse_args()
     if args.table_only:
         results = json.loads(args.out.read_text())
@@ -243,7 +260,7 @@ def main():
             results["benchmarks"][name] = run_one(name, args.quick)
             args.out.write_text(json.dumps(results, indent=2) + "\n")
     print(json.dumps(results, indent=2))
-    if not args.no_readme:
+    if not args.no_table:
         write_table(results)
 
 

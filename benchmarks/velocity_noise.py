@@ -6,7 +6,7 @@ noise seeds each: the worst-axis RMS error over the second half of the run (line
 angular rad/s), (a) with the paper's gains of eq. (63), (b) the same estimate through the
 causal low-pass filter `visjax.estimators.lowpass` at several bandwidths (its delay
 stated), (c) with the gains scaled down. The grids are fixed in advance (no value chosen
-to match anything); prints JSON (README, "Noise").
+to match anything); prints JSON (docs/papers/chitrakaran.md).
 
     python benchmarks/velocity_noise.py [--duration 10] [--seeds 4]
 """

@@ -17,8 +17,8 @@ Two paths:
   take a branch of their own that is NaN-free in value and gradient.
 - `decompose_homography_known_normal` takes the constant plane normal $n^*$ as known. For
   two unit vectors $a, b \\perp n^*$ with $a \\times b = n^*$, $H a = \\bar R a$ and
-  $H b = \\bar R b$, so $\\bar R = [Ha, Hb, Ha \\times Hb][a, b, n^*]^T$ (DESIGN.md,
-  Numerics). It uses no eigen-decomposition and is smooth everywhere, including $H = I$.
+  $H b = \\bar R b$, so $\\bar R = [Ha, Hb, Ha \\times Hb][a, b, n^*]^T$. It uses no
+  eigen-decomposition and is smooth everywhere, including $H = I$.
 """
 
 import jax
