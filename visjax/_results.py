@@ -83,6 +83,18 @@ def raise_or_keep(result, x, throw: bool):
     return x
 
 
+def first_failure(result, failed, code, index):
+    """"First failure wins": record `code` and `index` if nothing has failed yet
+    (`failed < 0`) and `code` is not successful; otherwise keep `result` and `failed`.
+
+    **Returns:** `(result, failed)`, `failed` with its own dtype.
+    """
+    fresh = (failed < 0) & (code != RESULTS.successful)
+    return RESULTS.where(fresh, code, result), jnp.where(fresh, index, failed).astype(
+        jnp.result_type(failed)
+    )
+
+
 def all_finite(tree):
     """Whether every floating entry of a pytree is finite. An explicit `isfinite` test, so
     that no reduction can drop a NaN (XLA's CPU `max` can, in large `vmap` batches)."""

@@ -7,9 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from visjax import RESULTS
+from visjax import RESULTS, result_names
+from visjax._results import first_failure
 from visjax.estimators import (
     AbstractEstimator,
+    AbstractJumpEstimator,
     CheckpointAdjoint,
     DirectAdjoint,
     SaveAt,
@@ -404,3 +406,104 @@ def test_result_names_of_a_run_and_of_a_batch():
         jnp.stack([stream.ys, bad.ys])
     )
     assert result_names(both) == ["successful", "nonfinite_measurement"]
+
+
+class CountingJumps(AbstractJumpEstimator):
+    """Counts the samples that arrived (`jump`) and integrates the held sample."""
+
+    def init(self, y0):
+        return jnp.zeros(2, y0.dtype)
+
+    def vector_field(self, t, state, y):
+        return jnp.stack([jnp.zeros((), y.dtype), y[0]])
+
+    def jump(self, state, y):
+        return state.at[0].add(1.0)
+
+    def output(self, t, state, y):
+        return state
+
+
+def test_the_contract_is_abstract_and_jump_is_a_declared_capability():
+    """A subclass missing a required method cannot be built; `jump` fires once per new
+    present sample (not per grid step, not for a dropped sample) and only for an
+    `AbstractJumpEstimator`."""
+
+    class NoOutput(AbstractEstimator):
+        def init(self, y0):
+            return y0
+
+        def vector_field(self, t, state, y):
+            return state
+
+    with pytest.raises(TypeError, match="output"):
+        NoOutput()
+
+    class NoJump(AbstractJumpEstimator):
+        def init(self, y0):
+            return y0
+
+        def vector_field(self, t, state, y):
+            return state
+
+        def output(self, t, state, y):
+            return state
+
+    with pytest.raises(TypeError, match="jump"):
+        NoJump()
+
+    n = 50
+    ts = jnp.arange(n, dtype=jnp.float64) * 0.01
+    ys = jnp.ones((n, 1))
+    present = np.ones(n, bool)
+    present[[5, 6, 20]] = False
+    for dt, keep in ((None, None), (0.001, None), (None, present), (0.001, present)):
+        sol = run(CountingJumps(), Stream(ts=ts, ys=ys, present=keep), dt=dt)
+        arrived = n if keep is None else int(keep.sum())
+        # every present sample fires the jump once, the first included
+        assert float(sol.final_state[0]) == arrived
+        # the held sample (1.0) integrated over the run, whatever the grid
+        assert float(sol.final_state[1]) == pytest.approx(float(ts[-1] - ts[0]), rel=1e-12)
+    # the jump-free estimator integrates the same and has no jump to fire
+    assert not isinstance(Accumulator(), AbstractJumpEstimator)
+
+
+def test_first_failure_keeps_the_first_code_and_sample():
+    codes = [RESULTS.successful, RESULTS.diverged, RESULTS.successful, RESULTS.nonfinite_state]
+
+    def loop(codes_value):
+        result, failed = RESULTS.successful, jnp.array(-1, jnp.int32)
+        for k in range(4):
+            code = RESULTS.where(codes_value[k], codes[k], RESULTS.successful)
+            result, failed = first_failure(result, failed, code, k)
+        return result, failed
+
+    result, failed = jax.jit(loop)(jnp.array([True] * 4))
+    assert result_names(result) == "diverged" and int(failed) == 1
+    assert failed.dtype == jnp.int32
+    batch = jax.vmap(loop)(jnp.array([[True] * 4, [True, False, True, True], [False] * 4]))
+    assert result_names(batch[0]) == ["diverged", "nonfinite_state", "successful"]
+    assert batch[1].tolist() == [1, 3, -1]
+
+
+def test_integration_step_is_one_rule():
+    """The sample times when every interval is within the cap and the Euler bound; else
+    min(cap, bound / 2); the chosen step runs without the runner's refusal."""
+    from visjax.estimators import integration_step
+
+    stream = _stream(n=50, dt=0.01)  # 100 Hz
+    slow = LinearObserver(a=jnp.array(10.0), b=jnp.array(1.0))  # bound 0.2 s
+    fast = LinearObserver(a=jnp.array(1000.0), b=jnp.array(1.0))  # bound 2 ms
+    assert integration_step(stream) is None
+    assert integration_step(stream, slow) is None
+    assert integration_step(stream, slow, max_step=1e-3) == 1e-3
+    assert integration_step(stream, fast) == pytest.approx(1e-3)  # half of 2 ms
+    assert integration_step(stream, fast, max_step=5e-4) == 5e-4
+    dt = integration_step(stream, fast)
+    assert run(fast, stream, dt=dt).result == RESULTS.successful
+    with pytest.raises(ValueError, match="Euler stability bound"):
+        run(fast, stream)  # the sample times are refused for these gains
+    with pytest.raises(ValueError, match="no stable step"):
+        integration_step(stream, LinearObserver(a=jnp.array(jnp.inf), b=jnp.array(1.0)))
+    with pytest.raises(ValueError, match="max_step"):
+        integration_step(stream, max_step=0.0)

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from .._results import RESULTS, all_finite, raise_or_keep
+from .._results import RESULTS, all_finite, first_failure, raise_or_keep
 from .._util import as_float, check_shape
 from ..estimators import AdaptiveOutput, AdaptiveStructureEstimator, Solution, Stream
 from ..geometry import so3_exp, so3_log
@@ -241,12 +241,9 @@ def bundle_adjustment(
             args = (sl(R_b), sl(x_b), sl(p_s), sl(p_c), sl(vs), sl(vc), omega_c, sl(keep), scale)
             y, code, rms, steps = _fit(y_prev, args, solver, max_steps)
             code = RESULTS.where(seen_bad[k], RESULTS.nonfinite_measurement, code)
-            running = result == RESULTS.successful
-            fail_now = running & (code != RESULTS.successful)
-            keep_y = running & ~fail_now
+            result, failed = first_failure(result, failed, code, k)
+            keep_y = failed < 0
             y_next = jax.tree_util.tree_map(lambda a, b: jnp.where(keep_y, a, b), y, y_prev)
-            result = RESULTS.where(fail_now, code, result)
-            failed = jnp.where(fail_now, k, failed)
             return (y_next, result, failed), (y_next, rms, steps)
 
         init_carry = (y_init, RESULTS.successful, jnp.array(-1))

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
 
-from .._results import RESULTS, all_finite, raise_or_keep
+from .._results import RESULTS, all_finite, first_failure, raise_or_keep
 from .._util import as_float
 from ..estimators import Solution
 
@@ -166,7 +166,6 @@ def extended_kalman_filter(
         ok_u = all_finite((x_u, P_u)) & model.valid(x_u, u)
         x_p, P_p = _predict(model, x_u, P_u, u, dts[k], substeps)
         ok_p = all_finite((x_p, P_p)) & model.valid(x_p, u)
-        running = result == RESULTS.successful
         code = RESULTS.where(
             bad_z & present[k],
             RESULTS.nonfinite_measurement,
@@ -174,10 +173,10 @@ def extended_kalman_filter(
                 all_finite((x_u, P_u, x_p, P_p)), RESULTS.diverged, RESULTS.nonfinite_state
             ),
         )
-        fail_now = running & (((bad_z & present[k]) | ~ok_u) | ~ok_p)
-        result = RESULTS.where(fail_now, code, result)
-        failed = jnp.where(fail_now, k, failed)
-        keep = running & ~fail_now
+        fails = ((bad_z & present[k]) | ~ok_u) | ~ok_p
+        code = RESULTS.where(fails, code, RESULTS.successful)
+        result, failed = first_failure(result, failed, code, k)
+        keep = failed < 0
         x_out = jnp.where(keep, x_u, x)
         P_out = jnp.where(keep, P_u, P)
         x_next = jnp.where(keep, x_p, x)

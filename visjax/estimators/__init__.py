@@ -13,6 +13,7 @@ from ._adaptive_ls import (
 from ._base import (
     AbstractAdjoint as AbstractAdjoint,
     AbstractEstimator as AbstractEstimator,
+    AbstractJumpEstimator as AbstractJumpEstimator,
     AbstractReducer as AbstractReducer,
     CheckpointAdjoint as CheckpointAdjoint,
     DirectAdjoint as DirectAdjoint,
@@ -21,6 +22,7 @@ from ._base import (
     Stream as Stream,
     WindowRMS as WindowRMS,
     WindowSummary as WindowSummary,
+    integration_step as integration_step,
     run as run,
 )
 from ._filters import lowpass as lowpass, lowpass_delay as lowpass_delay

@@ -51,7 +51,7 @@ from ..geometry import (
     to_homogeneous,
     unknown_feature_regressors,
 )
-from ._base import AbstractEstimator, Stream
+from ._base import AbstractJumpEstimator, Stream
 
 
 @final
@@ -241,7 +241,7 @@ _GAIN_NAMES = ("alpha_c", "alpha", "eta0", "eta1", "gamma_s0", "D", "eps_c", "ep
 
 
 @final
-class AdaptiveStructureEstimator(AbstractEstimator):
+class AdaptiveStructureEstimator(AbstractJumpEstimator):
     """Nath et al.: camera-parameter law (37)-(39) and structure law (41)-(45), output
     (50)-(51), and the camera recovered from the estimate (footnote 3).
 

@@ -2,13 +2,14 @@
 
 An estimator is a final `eqx.Module` whose fields are its gains and constants (arrays, so
 that a new value never recompiles). It has `init(y0)`, `vector_field(t, state, y)`,
-`output(t, state, y)`, and optionally `diagnostics`, `jump`, `valid`, `checks` and
-`max_stable_dt`. `run` integrates it on a time grid of its own (`dt`), holds each
-measurement sample from its arrival to the next (zero-order hold), fires `jump` when a new
-sample arrives, checks the state after every step, and returns a `Solution` that always
-carries a result code.
+`output(t, state, y)`, optionally `diagnostics`, `valid`, `checks` and `max_stable_dt`, and
+a `jump` if it is an `AbstractJumpEstimator`. `run` integrates it on a time grid of its own
+(`dt`), holds each measurement sample from its arrival to the next (zero-order hold), fires
+`jump` when a new sample arrives, checks the state after every step, and returns a
+`Solution` that always carries a result code.
 """
 
+import abc
 import math
 from collections.abc import Callable
 from typing import final
@@ -20,14 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
-from .._results import RESULTS, all_finite
+from .._results import RESULTS, all_finite, first_failure
 from .._util import chunked_map
 
 
 class AbstractEstimator(eqx.Module):
     """The contract every visjax estimator fulfils.
 
-    Required:
+    Required (`abc.abstractmethod`s: a subclass that lacks one cannot be instantiated):
 
     - `init(y0) -> State`: the initial state (a typed `eqx.Module`) from the first sample.
     - `vector_field(t, state, y) -> State`: the continuous-time law, `y` being the sample
@@ -37,8 +38,6 @@ class AbstractEstimator(eqx.Module):
     Optional (the defaults say "nothing to add"):
 
     - `diagnostics(t, state, y)`: internal signals, saved only on request; default `None`.
-    - `jump(state, y) -> State`: a discrete update when a new sample arrives (covariance
-        resetting, a filter update); default identity.
     - `valid(state, y) -> bool`: the paper's standing assumptions on the state (bounded,
         positive depth estimate, ...). The runner checks it after every step and turns a
         violation into `RESULTS.diverged`. Default: always valid (finiteness is checked
@@ -50,27 +49,27 @@ class AbstractEstimator(eqx.Module):
     - `max_stable_dt(y) -> float array`: the largest Euler step that is stable for the
         gains (evaluated at the first sample); the runner refuses a larger step.
         Default: `inf`.
+
+    Discrete updates when a new sample arrives (covariance resetting, a filter's
+    measurement update) are a declared capability: subclass `AbstractJumpEstimator` and
+    implement its `jump`.
     """
 
+    @abc.abstractmethod
     def init(self, y0: PyTree) -> PyTree:
         """The initial state from the first measurement."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def vector_field(self, t: Float[Array, ""], state: PyTree, y: PyTree) -> PyTree:
         """The time derivative of the state under the held measurement `y`."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def output(self, t: Float[Array, ""], state: PyTree, y: PyTree) -> PyTree:
         """The estimate the user reads."""
-        raise NotImplementedError
 
     def diagnostics(self, t: Float[Array, ""], state: PyTree, y: PyTree) -> PyTree:
         """Internal signals for plots and studies (default: none)."""
         return None
-
-    def jump(self, state: PyTree, y: PyTree) -> PyTree:
-        """A discrete update applied when the sample `y` arrives (default: none)."""
-        return state
 
     def valid(self, state: PyTree, y: PyTree) -> Bool[Array, ""]:
         """Whether `state` satisfies the estimator's standing assumptions (default: yes)."""
@@ -83,6 +82,17 @@ class AbstractEstimator(eqx.Module):
     def max_stable_dt(self, y: PyTree) -> Float[Array, ""]:
         """The largest stable Euler step for these gains (default: no bound)."""
         return jnp.array(jnp.inf)
+
+
+class AbstractJumpEstimator(AbstractEstimator):
+    """An estimator with a discrete update when a new sample arrives: `run` applies
+    `jump(state, y)` at each new present sample (the first included, after `init`), before
+    reading the output and integrating under that sample. Covariance resetting and a
+    filter's measurement update are jumps."""
+
+    @abc.abstractmethod
+    def jump(self, state: PyTree, y: PyTree) -> PyTree:
+        """The state after the sample `y` arrives."""
 
 
 def _as_flags(x):
@@ -181,11 +191,13 @@ class AbstractReducer(eqx.Module):
     the stream's ground truth of the sample held at that step.
     """
 
+    @abc.abstractmethod
     def init(self, output0: PyTree, truth0: PyTree) -> PyTree:
-        raise NotImplementedError
+        """The accumulator at the first step."""
 
+    @abc.abstractmethod
     def update(self, acc: PyTree, t: Float[Array, ""], output: PyTree, truth: PyTree) -> PyTree:
-        raise NotImplementedError
+        """The accumulator after one more step."""
 
 
 @final
@@ -286,6 +298,18 @@ class Solution(eqx.Module):
     failed_sample: Int[Array, ""]
 
 
+class _Carry(eqx.Module):
+    """What the runner's loop carries from one integration step to the next."""
+
+    state: PyTree  # the estimator's state (frozen at its last valid value after a failure)
+    acc: PyTree  # the reducer's accumulator, or None
+    result: RESULTS  # the first failure's code, or successful
+    failed: Int[Array, ""]  # the sample held at the first failure, -1 if none
+    count: Int[Array, ""]  # the grid step about to be taken
+    k_prev: Int[Array, ""]  # the sample held at the previous step (a new one fires `jump`)
+    y_held: PyTree  # the latest present measurement (with dropped samples), else None
+
+
 def _check_stream(stream: Stream) -> int:
     if not isinstance(stream, Stream):
         raise ValueError(f"`stream` must be a visjax Stream; got {type(stream).__name__}.")
@@ -372,6 +396,48 @@ def _precheck(estimator, stream, h_max, solver):
                 f"{float(bound):.4g} s of {type(estimator).__name__}'s gains: the run would "
                 "diverge. Pass a smaller `dt` (the measurements are held between samples)."
             )
+
+
+def integration_step(
+    stream: Stream, estimator: AbstractEstimator | None = None, *, max_step: float | None = None
+) -> float | None:
+    """The integration step `dt` for `run`: the one rule visjax uses when a step is not given.
+
+    `None` (integrate at the sample times) when every sample interval is within both
+    `max_step` and the Euler stability bound of the estimator's gains
+    (`estimator.max_stable_dt` at the first sample); otherwise a fixed step of
+    `min(max_step, bound / 2)`, the samples held between steps. Half the bound keeps a margin
+    where the bound is a worst case met at its edge.
+
+    **Arguments:**
+
+    - `stream`: the `Stream` to be run (concrete times).
+    - `estimator`: the estimator whose bound applies, or `None` (no bound: e.g. when the
+        estimator's gains are derived from the step itself).
+    - `max_step`: the largest step the law may take (e.g. `1e-3`: the papers' 1 kHz laws
+        on slower data), or `None` (no cap: the samples' own rate when stable).
+
+    **Returns:** a Python float, or `None` for the sample times.
+    """
+    _check_stream(stream)
+    ts = _concrete(stream.ts)
+    if ts is None:
+        raise ValueError("`integration_step` needs the stream's times concrete (not traced).")
+    longest = float(np.max(np.diff(ts)))
+    bound = math.inf
+    if estimator is not None:
+        bound = float(_concrete(_first_bound(estimator, stream)))
+        if not (bound > 0):
+            raise ValueError(
+                f"{type(estimator).__name__}'s Euler stability bound is {bound!r}: no stable "
+                "step exists for these gains."
+            )
+    cap = math.inf if max_step is None else float(max_step)
+    if not cap > 0:
+        raise ValueError(f"`max_step` must be positive or None; got {max_step!r}.")
+    if longest <= min(cap, bound):
+        return None
+    return min(cap, 0.5 * bound)
 
 
 def _unroll(unroll: int, length: int) -> int:
@@ -596,12 +662,19 @@ def _run(
         if reducer is not None:
             acc = reducer.init(estimator.output(ts[0], state, y0), at(truth, 0))
         y_held0 = y0 if (lazy and stream.present is not None) else None
-        count = jnp.zeros((), jnp.int32)
-        return (state, acc, r, failed, count, jnp.full((), -1, jnp.int32), y_held0)
+        return _Carry(
+            state=state,
+            acc=acc,
+            result=r,
+            failed=failed,
+            count=jnp.zeros((), jnp.int32),
+            k_prev=jnp.full((), -1, jnp.int32),
+            y_held=y_held0,
+        )
 
     term = diffrax.ODETerm(lambda t, s, y: estimator.vector_field(t, s, y))
 
-    has_jump = type(estimator).jump is not AbstractEstimator.jump
+    has_jump = isinstance(estimator, AbstractJumpEstimator)
 
     def eager_sample(j, y_held):
         y = at(ys, held_sample(j))
@@ -610,7 +683,7 @@ def _run(
     def step(carry, save: bool, sample):
         """One integration step; `sample(j, y_held)` is the measurement held at step j
         and whether it is finite."""
-        state_in, acc, r, failed, j_count, k_prev, y_held = carry
+        state_in, acc, j_count, y_held = carry.state, carry.acc, carry.count, carry.y_held
         # past the end (the padding of the last chunk) the last step is repeated with a
         # zero step: the state does not move, the reducer skips it, its saves are dropped
         active = j_count <= last
@@ -621,7 +694,7 @@ def _run(
         y, y_finite = sample(j, y_held)
         if has_jump:
             state = jax.lax.cond(
-                k != k_prev, lambda s, y: estimator.jump(s, y), lambda s, y: s, state_in, y
+                k != carry.k_prev, lambda s, y: estimator.jump(s, y), lambda s, y: s, state_in, y
             )
         else:
             state = state_in
@@ -646,13 +719,19 @@ def _run(
             solver_r == diffrax.RESULTS.successful, code, RESULTS.promote(solver_r)
         )
         code = RESULTS.where(y_finite, code, RESULTS.nonfinite_measurement)
-        newly = (failed < 0) & (code != RESULTS.successful)
-        r = RESULTS.where(newly, code, r)
-        failed = jnp.where(newly, k, failed).astype(jnp.int32)
+        r, failed = first_failure(carry.result, carry.failed, code, k)
         keep = failed >= 0
         state = jax.tree_util.tree_map(lambda a, b: jnp.where(keep, a, b), state_in, s_new)
-        y_held = None if y_held is None else y
-        return (state, acc, r, failed, j_count + 1, k, y_held), saved
+        new = _Carry(
+            state=state,
+            acc=acc,
+            result=r,
+            failed=failed,
+            count=j_count + 1,
+            k_prev=k,
+            y_held=None if y_held is None else y,
+        )
+        return new, saved
 
     def steps(carry, length: int, sample, adjoint):
         """`length` steps with the saving of `saveat`, the first at the carry's counter."""
@@ -714,7 +793,7 @@ def _run(
             return sample
 
         def one_chunk(c, first):
-            prepared = prepare(c[4], span)
+            prepared = prepare(c.count, span)
             # the first chunk starts the run from its first sample (the value the loop
             # holds, to the last bit: the sign-based laws start from e - e_hat = 0
             # exactly); one chunk body, so the measurement and the step are compiled once
@@ -736,7 +815,7 @@ def _run(
             saved = jax.tree_util.tree_map(
                 lambda y: y.reshape((y.shape[0] * y.shape[1],) + y.shape[2:])[:n_saved], saved
             )
-    state, acc, r, failed = carry[:4]
+    state, acc, r, failed = carry.state, carry.acc, carry.result, carry.failed
     outputs, diagnostics, states = (None, None, None) if saved is None else saved
     saved_ts = None
     if saveat.any:
