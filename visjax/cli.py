@@ -4,15 +4,14 @@
 import argparse
 import math
 import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 from . import report
+from .papers.chitrakaran import K_EQ63, RHO_EQ63  # the paper's gains live in its module
 
-K_DEFAULT = "300 300 200 15 15 15"  # Chitrakaran et al., eq. (63)
-RHO_DEFAULT = "100 100 10 1 1 1"
+K_DEFAULT = " ".join(f"{k:g}" for k in K_EQ63)
+RHO_DEFAULT = " ".join(f"{r:g}" for r in RHO_EQ63)
 
 
 def _six(text: str) -> list[float]:
@@ -246,7 +245,7 @@ def _add_study_options(parser, seeds: int) -> None:
         "--shard",
         action="store_true",
         help="shard each chunk over every JAX device (GPUs; on CPUs one process per device "
-        "with jax.distributed, see README)",
+        "with jax.distributed, see docs/sweeps-and-tuning.md)",
     )
     _add_out(parser, "runs.parquet, runs.csv, summary.json and the figures")
     _add_format(parser)
@@ -291,7 +290,7 @@ def _run_reproduce(a):
 
 
 _OWN_DATA = (
-    "run on your own data file (.npz, see README 'Your own data') instead of the paper's simulation"
+    "run on your own data file (.npz, see docs/your-own-data.md) instead of the paper's simulation"
 )
 
 
@@ -313,7 +312,7 @@ def _quick_help() -> str:
     return (
         f"shorter runs: {changes}, and the testbed without its studies (the camera matrix "
         "of section 2.3, the v_py sensitivity); the velocity simulation runs in full. "
-        "results/ then differs from the README's tables, which are full runs"
+        "results/ then differs from the documentation's tables, which are full runs"
     )
 
 
@@ -410,7 +409,7 @@ def build_parser() -> argparse.ArgumentParser:
         "identical noisy inputs over noise seeds",
     )
     c.add_argument("problem", choices=("velocity", "structure", "euclidean"))
-    _add_data(c, "your own data file (.npz, see README 'Your own data'); noise is added on top")
+    _add_data(c, "your own data file (.npz, see docs/your-own-data.md); noise is added on top")
     _add_noise(c, 0.1)
     c.add_argument("--seeds", type=_count, default=4, help="noise seeds (default 4)")
     _add_seed(c)
@@ -579,46 +578,13 @@ def _execute(args) -> int:
     if args.out is None:
         args.func(args)
         return 0
-    final = Path(args.out)
-    anchor = final if final.exists() else final.parent
-    while not anchor.exists():
-        anchor = anchor.parent
-    staging = Path(tempfile.mkdtemp(prefix=".visjax-", dir=anchor))
-    stdout = sys.stdout
-    try:
-        if getattr(args, "out_is_file", False):  # one file: staged, then moved into place
-            args.out = str(staging / final.name)
-            sys.stdout = _Renaming(stdout, args.out, str(final))
-            args.func(args)
-            final.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(staging / final.name, final)
-            return 0
-        args.out = str(staging)
-        sys.stdout = _Renaming(stdout, str(staging), str(final))  # print the final paths
+    from .io import staged_output
+
+    file = getattr(args, "out_is_file", False)
+    with staged_output(args.out, file=file) as staged:
+        args.out = str(staged)
         args.func(args)
-        final.mkdir(parents=True, exist_ok=True)
-        for item in staging.iterdir():
-            target = final / item.name
-            if target.is_dir():
-                shutil.rmtree(target)
-            os.replace(item, target)
-    finally:
-        sys.stdout = stdout
-        shutil.rmtree(staging, ignore_errors=True)
     return 0
-
-
-class _Renaming:
-    """A text stream that writes the final output folder where the staging one is named."""
-
-    def __init__(self, stream, old: str, new: str):
-        self.stream, self.old, self.new = stream, old, new
-
-    def write(self, text):
-        return self.stream.write(text.replace(self.old, self.new))
-
-    def __getattr__(self, name):
-        return getattr(self.stream, name)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """Documented data formats: each estimator's input as a file (NPZ, and CSV for pixel
 tracks), for users with their own logged data (the tables are in `visjax.io._formats`); and
 the outputs of the command line: the schema of every `summary.json`, table and array file
-(`SUMMARIES`, `TABLES`, `ARRAYS`), checked when written and loaded with `read_summary`."""
+(`SUMMARIES`, `TABLES`, `ARRAYS`), checked when written and loaded with `read_summary`;
+and staged (atomic) output folders (`staged_output`)."""
 
 from ._formats import (
     DataFormatError as DataFormatError,
@@ -22,3 +23,4 @@ from ._outputs import (
     validate_summary as validate_summary,
     write_summary as write_summary,
 )
+from ._staging import staged_output as staged_output, user_path as user_path

@@ -190,7 +190,10 @@ SUMMARIES = {
         "rows": (
             "list[dict]",
             "the summary table: `what`, `value` (a number, `null` if infeasible), `unit`, "
-            "`reference` (the paper's value or aim, as text)",
+            "`reference` (a number, in `unit`) and `reference_kind` (what the reference is: "
+            "`published` (the paper's value), `truth` (the simulation's), `bound` (the "
+            "largest value the project accepts), `OpenCV` (OpenCV's result on the same "
+            "input))",
         ),
     },
 }
@@ -226,7 +229,8 @@ TABLES = {
         "what": "str",
         "value": "float",
         "unit": "str",
-        "reference": "str",
+        "reference": "float",
+        "reference_kind": "str",
     },
 }
 
@@ -330,8 +334,11 @@ def finite_or_null(obj):
 
 
 def write_summary(path, summary: dict) -> dict:
-    """Validate `summary` and write it to `path` as strict JSON; returns what was written."""
-    clean = validate_summary(finite_or_null(summary))
+    """Validate `summary` and write it to `path` as strict JSON; returns what was written.
+    Inside `staged_output`, paths name the final folder, not the staging one."""
+    from ._staging import unstaged
+
+    clean = validate_summary(finite_or_null(unstaged(summary)))
     Path(path).write_text(json.dumps(clean, indent=2, allow_nan=False))
     return clean
 

@@ -219,7 +219,7 @@ def velocity_problem(
     """
     import jax.numpy as jnp
 
-    from .._results import RESULTS
+    from .._results import RESULTS, first_failure
     from ..baselines import frame_poses, velocity_ekf, velocity_smoother
     from ..estimators import VelocityEstimator, fixed_camera_stream, run
 
@@ -277,9 +277,7 @@ def velocity_problem(
             )
             result, failed = RESULTS.successful, jnp.array(-1)
             for sol in sols.values():  # the first failure of any of the fits
-                fresh = (result == RESULTS.successful) & (sol.result != RESULTS.successful)
-                result = RESULTS.where(fresh, sol.result, result)
-                failed = jnp.where(fresh, sol.failed_sample, failed)
+                result, failed = first_failure(result, failed, sol.result, sol.failed_sample)
             return _with_velocity(sols[bandwidths[0]], v_hat, v_object, result, failed)
 
         return method
@@ -397,13 +395,21 @@ def euclidean_problem(
     """
 
     from ..baselines import bundle_adjustment, euclidean_ekf
-    from ..estimators import AdaptiveStructureEstimator, SaveAt, Stream, platform_stream, run
+    from ..estimators import (
+        AdaptiveStructureEstimator,
+        SaveAt,
+        Stream,
+        integration_step,
+        platform_stream,
+        run,
+    )
 
     ts, R_b, x_b, omega_c, clean, k, truth, nominal, source = euclidean_source(
         data, duration, rate_hz
     )
     interval = float(np.max(np.diff(np.asarray(ts))))
-    dt = None if interval <= 1e-3 else 1e-3
+    # 1 kHz on held samples; `from_nominal` derives its gains for that step (no bound here)
+    dt = integration_step(Stream(ts=ts, ys=ts), max_step=1e-3)
     every_out = max(1, int(round(interval / (dt or interval))))
     window = max(2, int(round(window_s / interval)))
     every = max(1, int(round(every_s / interval)))

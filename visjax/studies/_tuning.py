@@ -265,7 +265,15 @@ def euclidean_tuning(
     import jax
     import jax.numpy as jnp
 
-    from ..estimators import AdaptiveStructureEstimator, DirectAdjoint, SaveAt, platform_stream, run
+    from ..estimators import (
+        AdaptiveStructureEstimator,
+        DirectAdjoint,
+        SaveAt,
+        Stream,
+        integration_step,
+        platform_stream,
+        run,
+    )
     from ._problems import euclidean_source
 
     ts, R_b, x_b, omega_c, clean, n_known, truth, nominal, source = euclidean_source(
@@ -274,8 +282,8 @@ def euclidean_tuning(
     if truth is None:
         raise ValueError(f"{data}: tuning needs the file's true feature positions.")
     adj = DirectAdjoint() if adjoint is None else adjoint
-    interval = float(np.max(np.diff(np.asarray(ts))))
-    dt = None if interval <= 1e-3 else 1e-3
+    # 1 kHz on held samples; `from_nominal` derives its gains for that step (no bound here)
+    dt = integration_step(Stream(ts=ts, ys=ts), max_step=1e-3)
 
     def factory(params, key):
         noisy = clean + noise_px * jax.random.normal(key, clean.shape, clean.dtype)
