@@ -12,7 +12,7 @@ time), the estimator's loop. `jit(vmap)` over `--batch` noise keys.
 References timed in the same run, on the same trajectories:
 
 - `numpy_loop`: the per-step NumPy transcription of the paper
-  (`velocity_numpy_reference.py`, no noise), one trajectory: ns per step.
+  (`tests/reference_velocity.py`, no noise), one trajectory: ns per step.
 - `loop_only`: the estimator's loop alone on a prepared, shared measurement stream,
   vmapped over `--batch` gain settings: ns per trajectory-step (what the loop itself
   costs, without the per-trajectory reconstruction).
@@ -47,10 +47,9 @@ import jax.numpy as jnp
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
-sys.path.insert(0, str(pathlib.Path(__file__).parent))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the tests' helpers
 
-from velocity_numpy_reference import numpy_velocity_estimator  # noqa: E402
-
+from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
 from visjax import studies  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     SaveAt,

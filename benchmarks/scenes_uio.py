@@ -1,32 +1,30 @@
 """The UIO (Jang's thesis, eq. (3.5)) on scenes that are not the thesis' (issue 10, item 4).
 
-Each scene's parameters are fixed here first (camera motion, target motion, camera, rates);
-the gains come only from `visjax.design.design_uio`. The truth is the scene at 1 kHz
-(`visjax.sim.moving_point_scene` on closed-form trajectories); the camera records frames at
-50 Hz (pixels with optional Gaussian noise, and the camera velocity in the camera frame);
-the observer runs at 1 kHz on the held frames (`run(..., dt=1e-3)`), and the RMS of the
-position error (camera frame, metres) is taken over the last half of the run against the
-1 kHz truth.
+Each scene's parameters were fixed first (camera motion, target motion, camera, rates; now
+in `visjax.sim`'s catalogue); the gains come only from `visjax.design.design_uio`. The
+truth is the scene at 1 kHz (`visjax.sim.moving_point_scene` on closed-form
+trajectories); the camera records frames at 50 Hz (pixels with optional Gaussian noise,
+and the camera velocity in the camera frame); the observer runs at 1 kHz on the held
+frames (`run(..., dt=1e-3)`), and the RMS of the position error (camera frame, metres) is
+taken over the last half of the run against the 1 kHz truth. The helpers (frames, designs,
+observer, RMS) are in `tests/scenes.py`, shared with the tests.
 
     python benchmarks/scenes_uio.py            # the table (JSON), a couple of minutes
 
-Scenes:
+Scenes (their full descriptions: the docstrings of the `visjax.sim` functions named):
 
-- `sideways`: the camera translates sinusoidally sideways, $x_c(t) = [0.5\\sin(2\\pi\\,0.2\\,t),
-  0, 0]$ m (peak 0.63 m/s, its velocity changes sign every 2.5 s), looking along the world
-  $+z$; the target starts 2.5 m in front at $(0, -0.4, 2.5)$ m and moves along a vertical
+- `sideways` (`visjax.sim.sideways_camera_scene`): the camera translates sinusoidally
+  sideways, $x_c(t) = [0.5\\sin(2\\pi\\,0.2\\,t), 0, 0]$ m (peak 0.63 m/s, its velocity
+  changes sign every 2.5 s); the target starts 2.5 m in front and moves along a vertical
   line at 0.04 m/s. $D_1 = [0, 1, 0]$ (the target's image motion is vertical, $d =
   v_{py}x_3$, eq. (3.21)). 20 s.
-- `circle_diagonal`: the camera moves on a circle of radius 0.3 m parallel to the image
-  plane, $x_c(t) = [0.3\\sin(2\\pi\\,0.25\\,t), 0.3\\cos(2\\pi\\,0.25\\,t), 0]$ m; the
-  target starts at $(-0.2, -0.4, 2.5)$ m and moves diagonally at $(0.02, 0.04, 0)$ m/s. The
-  UUB split: $D_1 = [0, 1, 0]$ decoupled, $D_2 = [1, 0, 0]$ ($d_2 = v_{px}x_3$) a bounded
-  disturbance. 20 s.
+- `circle_diagonal` (`visjax.sim.circling_camera_scene`): the camera moves on a circle of
+  radius 0.3 m parallel to the image plane at 0.25 Hz; the target moves diagonally at
+  $(0.02, 0.04, 0)$ m/s. The UUB split: $D_1 = [0, 1, 0]$ decoupled, $D_2 = [1, 0, 0]$
+  ($d_2 = v_{px}x_3$) a bounded disturbance. 20 s.
 
 Camera for both: focal length 800 px, principal point (320, 240), image 640 x 480; initial
-depth guess 4 m ($x_{3,\\mathrm{guess}} = 0.25$/m). (The circle was first centred 0.3 m
-below the optical axis; the target then left the 640 x 480 image after about 15 s, so it
-was centred on the axis before any accuracy was looked at.)
+depth guess 4 m ($x_{3,\\mathrm{guess}} = 0.25$/m).
 
 Designs: `fixed_A_peak`, the thesis' form ($A$ frozen at the peak velocity, (3.6));
 `persistent`, `design_uio(..., u_range, persistent=True)` with its default weights;
@@ -77,172 +75,28 @@ $x_3 v_{px}/v_{cx}$ (11 cm): a bound, not a convergence. Dropped frames: a held 
 """
 
 import json
+import pathlib
 import sys
 import time
 
-import jax
-import jax.numpy as jnp
-import numpy as np
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the tests' helpers
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
-from visjax import RESULTS  # noqa: E402
-from visjax.design import design_uio, design_uio_for_motion  # noqa: E402
-from visjax.estimators import (  # noqa: E402
-    THESIS_A_U,
-    SaveAt,
-    UnknownInputObserver,
-    moving_camera_stream,
-    run,
+from tests.scenes import (  # noqa: E402
+    CAMERA_HZ,
+    RATE_HZ,
+    SCENES,
+    camera_stream,
+    design,
+    observer,
+    rms_last_half,
+    scene,
 )
-from visjax.sim import Trajectory, add_pixel_noise, moving_point_scene  # noqa: E402
-
-K_C = np.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
-IMAGE = (640.0, 480.0)
-RATE_HZ = 1000
-CAMERA_HZ = 50
-X3_GUESS = 1.0 / 4.0
-
-SCENES = {
-    "sideways": dict(
-        amplitude=0.5,
-        frequency_hz=0.2,
-        target_start=(0.0, -0.4, 2.5),
-        target_velocity=(0.0, 0.04, 0.0),
-        D1=(0.0, 1.0, 0.0),
-        D2=(0.0, 0.0, 0.0),
-        duration=20.0,
-    ),
-    "circle_diagonal": dict(
-        radius=0.3,
-        frequency_hz=0.25,
-        target_start=(-0.2, -0.4, 2.5),
-        target_velocity=(0.02, 0.04, 0.0),
-        D1=(0.0, 1.0, 0.0),
-        D2=(1.0, 0.0, 0.0),
-        duration=20.0,
-    ),
-}
-
-
-def camera_trajectory(name: str, ts) -> Trajectory:
-    """The camera's trajectory (world frame, closed form), its axes the world's."""
-    s = SCENES[name]
-    ts = jnp.asarray(ts)
-    w = 2.0 * jnp.pi * s["frequency_hz"]
-    z = jnp.zeros_like(ts)
-    if name == "sideways":
-        a = s["amplitude"]
-        x = jnp.stack([a * jnp.sin(w * ts), z, z], axis=1)
-        v = jnp.stack([a * w * jnp.cos(w * ts), z, z], axis=1)
-    else:
-        r = s["radius"]
-        x = jnp.stack([r * jnp.sin(w * ts), r * jnp.cos(w * ts), z], axis=1)
-        v = jnp.stack([r * w * jnp.cos(w * ts), -r * w * jnp.sin(w * ts), z], axis=1)
-    R = jnp.broadcast_to(jnp.eye(3), (ts.shape[0], 3, 3))
-    return Trajectory(ts=ts, R=R, x=x, twist=jnp.concatenate([v, jnp.zeros_like(v)], axis=1))
-
-
-def scene(name: str, duration: float | None = None):
-    """The 1 kHz truth of a scene (`MovingPointScene`)."""
-    s = SCENES[name]
-    duration = s["duration"] if duration is None else duration
-    ts = jnp.arange(int(round(duration * RATE_HZ)), dtype=float) / RATE_HZ
-    p0, vp = jnp.asarray(s["target_start"]), jnp.asarray(s["target_velocity"])
-    point = p0[None, :] + ts[:, None] * vp[None, :]
-    velocity = jnp.broadcast_to(vp, point.shape)
-    return moving_point_scene(camera_trajectory(name, ts), point, velocity, K_C, image_size=IMAGE)
-
-
-def camera_stream(truth, noise_px: float = 0.0, key=None, drop=None, dropped="hold"):
-    """The 50 Hz frames of a scene: pixels (noise, dropped frames: NaN, out of view: NaN)
-    and the camera velocity; `drop` a boolean mask over the frames; `dropped` how the
-    stream replaces a missing frame (`moving_camera_stream`)."""
-    step = RATE_HZ // CAMERA_HZ
-    frames = slice(0, None, step)
-    pixels = add_pixel_noise(key, truth.pixels[frames], noise_px)
-    if drop is not None:
-        pixels = jnp.where(jnp.asarray(drop)[:, None], jnp.nan, pixels)
-    return moving_camera_stream(
-        truth.ts[frames], pixels, truth.camera_velocity[frames], K_C, dropped=dropped
-    )
-
-
-def velocity_range(name: str, margin: float = 1.1):
-    """The box of camera velocities the design covers: the scene's planned peak speeds
-    (known to whoever commands the camera), times a margin."""
-    s = SCENES[name]
-    w = 2.0 * np.pi * s["frequency_hz"]
-    peak = (s["amplitude"] if name == "sideways" else s["radius"]) * w * margin
-    u_max = np.zeros(6)
-    u_max[0] = peak
-    if name != "sideways":
-        u_max[1] = peak
-    return -u_max, u_max
-
-
-def design(name: str, option: str, **grid):
-    """The observer fields of a scene for one design option (see `DESIGNS`), and the
-    `UIODesign`; `grid` goes to `design_uio_for_motion` (the test uses a small grid)."""
-    s = SCENES[name]
-    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    D1 = np.array(s["D1"])
-    uub = bool(np.any(np.asarray(s["D2"]) != 0))
-    if option == "fixed_A_peak":
-        # the thesis' form: A frozen at the peak velocity, (3.6) with a small Lipschitz bound
-        u = velocity_range(name, 1.0)[1]
-        A = np.einsum("j,jab->ab", u, THESIS_A_U)
-        d = design_uio(A, C, D1, 1e-3, uub=uub)
-        return {"A": A, "K": d.K, "Y": d.Y}, d
-    if option.startswith("persistent"):
-        alpha = float(option.split("_alpha")[1]) if "_alpha" in option else 0.0
-        d = design_uio(
-            np.zeros((3, 3)),
-            C,
-            D1,
-            0.0,
-            u_range=velocity_range(name),
-            persistent=True,
-            alpha=alpha,
-        )
-        return {"A": np.zeros((3, 3)), **d.observer_fields()}, d
-    if option.startswith("motion"):
-        # the persistent design whose error decays fastest over one period of the planned
-        # camera velocity (sampled at the camera's 50 Hz)
-        if option == "motion_line_D":
-            # D along the target's line (its direction known, its speed not): exact
-            # decoupling of the whole unknown input, no D2 (eq. (3.21) with v_p = s e)
-            e = np.asarray(s["target_velocity"], float)
-            D1 = e / np.linalg.norm(e)
-        truth = scene(name, 1.0 / s["frequency_hz"])
-        step = RATE_HZ // CAMERA_HZ
-        u_plan = np.asarray(truth.camera_velocity[::step])
-        d, rate = design_uio_for_motion(
-            np.zeros((3, 3)), C, D1, velocity_range(name), u_plan, 1.0 / CAMERA_HZ, **grid
-        )
-        fields = {"A": np.zeros((3, 3)), **d.observer_fields(), "D": D1}
-        if option == "motion_line_D":
-            fields["D2"] = np.zeros(3)
-        return fields, d
-    raise ValueError(option)
-
-
-def observer(name: str, fields) -> UnknownInputObserver:
-    s = SCENES[name]
-    fields = {"D": s["D1"], "D2": s["D2"], **fields}
-    return UnknownInputObserver(x3_guess=X3_GUESS, **fields)
-
-
-def rms_last_half(name: str, obs, truth, stream, throw: bool = True):
-    """The RMS of the position error (m) over the last half, and the run's result."""
-    sol = run(obs, stream, dt=1.0 / RATE_HZ, saveat=SaveAt(), throw=throw)
-    n = sol.ts.shape[0]
-    est = np.asarray(sol.outputs.position)
-    true = np.asarray(truth.position[:n])
-    half = np.asarray(sol.ts) >= 0.5 * float(truth.ts[-1])
-    err = est[half] - true[half]
-    return np.sqrt(np.mean(err**2, axis=0)), sol
-
+from visjax import RESULTS  # noqa: E402
 
 DESIGNS = {
     "sideways": ["fixed_A_peak", "persistent", "motion"],

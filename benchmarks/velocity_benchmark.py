@@ -4,7 +4,7 @@ gains.
 
 Prints JSON. The paper's section-6 scenario, 10 s at 1 kHz (10,000 samples):
 
-- `numpy_loop_s`: `velocity_numpy_reference.numpy_velocity_estimator`, the estimator written
+- `numpy_loop_s`: `tests.reference_velocity.numpy_velocity_estimator`, the estimator written
   per step from the paper (homography, decomposition, e, J, Euler step) in NumPy (best of
   `--numpy-repeats` runs, interleaved with the visjax rounds).
 - `visjax_one_s`: the same with visjax after compilation, as a user runs one long
@@ -32,10 +32,9 @@ import jax.numpy as jnp
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
-sys.path.insert(0, str(pathlib.Path(__file__).parent))
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the tests' helpers
 
-from velocity_numpy_reference import numpy_velocity_estimator  # noqa: E402
-
+from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     SaveAt,
     Stream,

@@ -1,9 +1,8 @@
-"""The fuzz cases of `benchmarks/fuzz.py` in the test suite: every public geometry
+"""The fuzz cases of `tests/fuzzing.py` in the test suite: every public geometry
 function and the three stream builders, well-posed, near-degenerate and invalid inputs;
 float64 here at batch sizes 1,000 and 1, float32 in a subprocess with x64 off. Nothing
 silently non-finite, nothing silently wrong, every invalid input flagged."""
 
-import importlib.util
 import inspect
 import json
 import os
@@ -13,14 +12,9 @@ import sys
 
 import pytest
 
-SCRIPT = pathlib.Path(__file__).parents[1] / "benchmarks" / "fuzz.py"
+from tests.fuzzing import PARTS, fuzz
 
-
-def _load():
-    spec = importlib.util.spec_from_file_location("visjax_fuzz", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+SCRIPT = pathlib.Path(__file__).parents[1] / "benchmarks" / "fuzz.py"  # its command line
 
 
 def _check(report, complete=True, streams=True):
@@ -52,8 +46,9 @@ def _check(report, complete=True, streams=True):
             assert per_kind["invalid"]["correct"] == 0, name
 
 
+@pytest.mark.slow
 def test_fuzz_float64_batch_1000():
-    report = _load().fuzz(1000, 7, "float64")
+    report = fuzz(1000, 7, "float64")
     assert report["batch"] == 1000
     _check(report)
 
@@ -62,20 +57,20 @@ def test_fuzz_float64_batch_1():
     """One input per call, for the functions whose results come from reductions over points
     or matrix factorisations (what a large batch could hide); the rest, and the stream
     builders, are fuzzed at batch 1 by `python benchmarks/fuzz.py --batch 1`."""
-    module = _load()
     parts = ["fuzz_reconstruction", "fuzz_decomposition", "fuzz_select_solution"]
-    report = module.fuzz(5, 8, "float64", batch=1, parts=parts)
+    report = fuzz(5, 8, "float64", batch=1, parts=parts)
     assert report["batch"] == 1
     _check(report, complete=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [11])
 def test_fuzz_float32(seed):
-    """The geometry in float32 (DESIGN.md: geometry must be usable with x64 off). The
+    """The geometry in float32 (docs/architecture.md: the geometry must be usable with x64 off). The
     stream builders are float64 estimator inputs; `python benchmarks/fuzz.py --dtype
     float32` fuzzes them in float32 too."""
     env = {**os.environ, "JAX_ENABLE_X64": "0", "JAX_PLATFORMS": "cpu"}
-    parts = [p for p in _load().PARTS if p != "fuzz_streams"]
+    parts = [p for p in PARTS if p != "fuzz_streams"]
     done = subprocess.run(
         [sys.executable, str(SCRIPT), "--n", "200", "--dtype", "float32", "--seed", str(seed)]
         + ["--parts", *parts],

@@ -1,11 +1,8 @@
 """The uncalibrated-camera structure estimator of Nath, Dawson, Tatlicioglu beyond its own
 scenario (issue 10, item 5): built from nominal values only, the camera recovered from its
 estimate (the paper's footnote 3), features that drop out of view, gains derived from the
-scene's scale, and the tilted scene of `benchmarks/scenes_euclidean.py` (its parameters
-fixed there)."""
-
-import importlib.util
-import pathlib
+scene's scale, and the tilted scene of `benchmarks/scenes_euclidean.py`
+(`visjax.sim.tilted_platform_scene`, its parameters fixed in `visjax.sim`'s catalogue)."""
 
 import equinox as eqx
 import jax
@@ -24,11 +21,7 @@ from visjax.estimators import (
 )
 from visjax.geometry import camera_parameters
 from visjax.papers import nath
-
-_path = pathlib.Path(__file__).parents[2] / "benchmarks" / "scenes_euclidean.py"
-_spec = importlib.util.spec_from_file_location("scenes_euclidean", _path)
-S = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(S)
+from visjax.sim import tilted_platform_scene
 
 SAVE = SaveAt(every=1000)  # one compiled run for every project-scenario test below
 
@@ -265,7 +258,7 @@ def test_the_tilted_scene_converges():
     """The scene that stalled at 4-47 mm with version 1's gains: 40 s noise-free, every
     unknown feature within 0.5 mm (measured 0.03-0.18 mm; the issue's aim 5 mm) from
     initial errors of 10-52 cm, the camera recovered within 2 px, 0.1 deg and 5 mm."""
-    sc = S.tilted_scene(40.0)
+    sc = tilted_platform_scene(40.0)
     stream = platform_stream(sc["ts"], sc["R_b"], sc["x_b"], sc["p_s"], sc["p_c"], sc["omega_c"])
     est = AdaptiveStructureEstimator.from_nominal(stream, *sc["nominal"])
     sol = run(est, stream, saveat=SaveAt(outputs=False))

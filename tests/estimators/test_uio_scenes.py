@@ -1,10 +1,8 @@
 """The UIO beyond the thesis' sets (issue 10, item 4): a sideways-translating camera with
 gains designed by visjax, the UUB split, a time-varying A, dropped frames, and jit, vmap
-and grad of the new options. The scenes are those of `benchmarks/scenes_uio.py` (their
-parameters fixed there), shortened."""
-
-import importlib.util
-import pathlib
+and grad of the new options. The scenes are those of `benchmarks/scenes_uio.py`
+(`visjax.sim.sideways_camera_scene`, its parameters fixed in `visjax.sim`'s catalogue; the
+frames, designs and observer of `tests/scenes.py`), shortened."""
 
 import equinox as eqx
 import jax
@@ -12,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from tests import scenes as S
 from tests.helpers import central_difference
 from visjax import RESULTS
 from visjax.design import design_uio
@@ -24,11 +23,6 @@ from visjax.estimators import (
     run,
 )
 from visjax.sim import Trajectory, moving_point_scene
-
-_path = pathlib.Path(__file__).parents[2] / "benchmarks" / "scenes_uio.py"
-_spec = importlib.util.spec_from_file_location("scenes_uio", _path)
-S = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(S)
 
 C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 SMALL_GRID = dict(alphas=(5.0,), depth_weights=(0.01, 0.003))

@@ -1,8 +1,5 @@
 """Seed 000 end to end: e, J, depth recovery, the estimator and the section-6 simulation."""
 
-import importlib.util
-import pathlib
-
 import diffrax
 import jax
 import jax.numpy as jnp
@@ -10,6 +7,7 @@ import numpy as np
 import pytest
 
 from tests.helpers import without_jaxtyping
+from tests.reference_velocity import numpy_velocity_estimator
 from visjax import RESULTS
 from visjax.estimators import (
     SaveAt,
@@ -29,14 +27,6 @@ from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
 
 K = jnp.array(K_EQ63)
 RHO = jnp.array(RHO_EQ63)
-
-
-def _numpy_reference():
-    path = pathlib.Path(__file__).parents[2] / "benchmarks" / "velocity_numpy_reference.py"
-    spec = importlib.util.spec_from_file_location("velocity_numpy_reference", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.numpy_velocity_estimator
 
 
 @pytest.fixture(scope="module")
@@ -110,6 +100,7 @@ def test_depth_recovery_and_the_singular_eq56(sc1k):
         np.testing.assert_allclose(M @ (sc.x_f_star + sc.R_star @ sc.s[0]), 0.0, atol=1e-10)
 
 
+@pytest.mark.slow
 def test_section6_simulation_converges_and_improves_with_rate(sc1k):
     """Noise-free section 6: per-DOF RMS over 5-10 s below 0.05; smaller at 4 kHz."""
     red = WindowRMS(5.0, 10.0, field="v_hat")
@@ -141,7 +132,7 @@ def test_agrees_with_numpy_reference():
     sc = section6_scenario(0.5, 1000.0)
     stream, n_star, z1 = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0])
     sol = run(VelocityEstimator(K=K, rho=RHO), stream)
-    ref = _numpy_reference()(
+    ref = numpy_velocity_estimator(
         np.asarray(sc.pixels),
         np.asarray(sc.A),
         np.asarray(sc.R_star),

@@ -1,8 +1,30 @@
 """General scene builders: trajectories, camera rigs, sampling, pixel noise; no paper here.
 
-The papers' own scenarios are built from these in `visjax.papers`.
+The papers' own scenarios are built from these in `visjax.papers`. A catalogue of canonical
+scenes that are none of the papers' (the ones the tests, the benchmarks and the example data
+files use) is here too: `sinusoidal_plate_scene`, `spline_board_scene`,
+`sideways_camera_scene`, `circling_camera_scene`, `tilted_platform_scene`,
+`side_looking_platform_scene`, and their data-file forms (`*_record`).
 """
 
+from ._catalogue import (
+    MOVING_TARGET_FRAME_HZ as MOVING_TARGET_FRAME_HZ,
+    MOVING_TARGET_IMAGE as MOVING_TARGET_IMAGE,
+    MOVING_TARGET_K as MOVING_TARGET_K,
+    MOVING_TARGET_RATE_HZ as MOVING_TARGET_RATE_HZ,
+    MOVING_TARGET_SCENES as MOVING_TARGET_SCENES,
+    circling_camera_scene as circling_camera_scene,
+    moving_target_camera as moving_target_camera,
+    moving_target_scene as moving_target_scene,
+    side_looking_platform_scene as side_looking_platform_scene,
+    sideways_camera_record as sideways_camera_record,
+    sideways_camera_scene as sideways_camera_scene,
+    sinusoidal_plate_record as sinusoidal_plate_record,
+    sinusoidal_plate_scene as sinusoidal_plate_scene,
+    spline_board_scene as spline_board_scene,
+    tilted_platform_record as tilted_platform_record,
+    tilted_platform_scene as tilted_platform_scene,
+)
 from ._moving_point import (
     MovingPointScene as MovingPointScene,
     moving_point_scene as moving_point_scene,

@@ -5,8 +5,9 @@ Written as a user would write it from the paper, with no vectorisation over time
 1 kHz sample, the homography from the four point pairs (eq. (17), 8x8 DLT with g33 = 1),
 H = A^-1 G A (eq. (16)), its decomposition with the known normal n* (eq. (12)), the depth
 ratio, e (eqs. (18)-(20), (24), (28)), J (eq. (33)), then one Euler step of eqs. (39)-(40)
-and v_hat = J^-1 kappa_hat (Theorem 2). Used by `velocity_benchmark.py` and, as an
-independent reference, by the tests.
+and v_hat = J^-1 kappa_hat (Theorem 2). Used, as an independent reference, by the tests
+(`tests/estimators/test_velocity.py`) and by the benchmarks (`benchmarks/velocity_benchmark.py`,
+`benchmarks/monte_carlo.py`, which put the repository's root on `sys.path`).
 """
 
 import numpy as np
