@@ -17,15 +17,21 @@ jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 jax.config.update("jax_numpy_rank_promotion", "raise")
 
-# Each test process caches its compiled programs on disk (its own folder, removed at exit):
-# tests that build the same program in different closures (the same scene, the same
-# estimator) then compile it once. Measured on five velocity test modules under -n 2: 261 s
-# without, 172 s with. Every process starts empty, as CI does. VISJAX_TEST_NO_CACHE=1 turns
-# it off.
+# One compilation cache on disk for the whole run: the first process (pytest itself, the
+# controller of `-n 2`) makes the folder and removes it at exit; the xdist workers and every
+# subprocess a test starts (the command line, float32 checks, multi-process sweeps, notebook
+# kernels) inherit it through JAX's own environment variables, so a program compiled once
+# (the same scene, the same estimator) is loaded from disk everywhere else. Every run starts
+# empty, as CI does. VISJAX_TEST_NO_CACHE=1 turns it off.
 if not os.environ.get("VISJAX_TEST_NO_CACHE"):
-    _cache = tempfile.mkdtemp(prefix="visjax-test-jax-cache-")
-    atexit.register(shutil.rmtree, _cache, ignore_errors=True)
-    jax.config.update("jax_compilation_cache_dir", _cache)
+    if "VISJAX_TEST_JAX_CACHE" not in os.environ:
+        _cache = tempfile.mkdtemp(prefix="visjax-test-jax-cache-")
+        atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+        os.environ["VISJAX_TEST_JAX_CACHE"] = _cache
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = os.environ["VISJAX_TEST_JAX_CACHE"]
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+    os.environ["JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES"] = "0"
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
 
@@ -52,10 +58,10 @@ def no_jaxtyping():
         yield
 
 
-# The slowest modules (each test a minute of compiling in its own process or kernel) run
-# first, so that `pytest -n 2` fills the gaps with the short tests instead of ending on a
-# long tail in one worker.
-_FIRST = ("test_outputs.py", "test_fuzz.py", "test_notebooks.py", "test_uio.py", "test_cli.py")
+# The slowest modules (tests that compile for tens of seconds or run a command end to end)
+# run first, so that `pytest -n 2` fills the gaps with the short tests instead of ending on
+# a long tail in one worker.
+_FIRST = ("test_notebooks.py", "test_outputs.py", "test_cli.py", "test_uio.py", "test_sweep.py")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -234,15 +234,13 @@ def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch)
     locked.chmod(0o755)
 
 
+@pytest.mark.slow
 def test_velocity_on_a_data_file(tmp_path, capsys):
     """`visjax velocity --data FILE` on the example scene (not the paper's): the recovered
     z1* and, since the file has the truth, `rms_last_half`; a bad file is one line."""
-    import sys
-
     import numpy as np
 
-    sys.path.insert(0, str(Path(__file__).parents[1] / "examples"))
-    from make_example_data import velocity_example
+    from tests.example_data import velocity_example
 
     data = velocity_example(duration=1.0, noise_px=0.0)  # 2% of the features missing
     path = data.save(tmp_path / "v.npz")
@@ -271,15 +269,13 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
         main(["velocity", "--data", str(tmp_path / "missing.npz")])
 
 
+@pytest.mark.slow
 def test_structure_and_euclidean_on_data_files(tmp_path, capsys):
     """`visjax structure|euclidean --data FILE` on the example scenes (not the papers'):
     gains designed / derived from the file alone, errors reported against its truth."""
-    import sys
-
     import numpy as np
 
-    sys.path.insert(0, str(Path(__file__).parents[1] / "examples"))
-    from make_example_data import euclidean_example, structure_example
+    from tests.example_data import euclidean_example, structure_example
 
     path = structure_example(duration=6.0, noise_px=0.0).save(tmp_path / "s.npz")
     out = tmp_path / "s"
@@ -304,6 +300,7 @@ def test_structure_and_euclidean_on_data_files(tmp_path, capsys):
     assert "feature 11: final position error" in printed
 
 
+@pytest.mark.slow
 def test_compare_command_writes_records_that_load(tmp_path, capsys):
     import pandas as pd
 
@@ -330,6 +327,7 @@ def test_compare_command_writes_records_that_load(tmp_path, capsys):
     assert "--duration applies to the paper's scenario" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_sweep_then_tune_commands(tmp_path, capsys):
     """`visjax sweep`, then `visjax tune` of the same problem (one process: the set-up and
     the compiled sweep are reused): the table, a flagged gain, strict JSON summaries, the

@@ -1,4 +1,4 @@
-"""The layers of DESIGN.md: imports flow down, OpenCV and cvxpy load only when used."""
+"""The layers of docs/architecture.md: imports flow down, OpenCV and cvxpy load only when used."""
 
 import ast
 import pathlib

@@ -136,6 +136,7 @@ def test_paper_notebook_transforms_the_public_api(name):
     assert f"{estimator}(" in _code(nb) or f"{estimator}.from_nominal(" in _code(nb)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_notebook_executes(name, monkeypatch):
     for key, value in SHORT.items():

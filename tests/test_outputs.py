@@ -51,7 +51,9 @@ def _schema_arrays(relative: str):
     return None
 
 
-def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
+def check_outputs(results) -> dict:
+    """Every file under `results` loads (pandas, NumPy) and follows its documented schema;
+    returns the summaries' kinds by path."""
     files = sorted(p for p in results.rglob("*") if p.is_file())
     kinds = {}
     for path in files:
@@ -94,6 +96,12 @@ def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
             assert path.stat().st_size > 1000, rel
         else:
             raise AssertionError(f"an output with no documented format: {rel}")
+    return kinds
+
+
+@pytest.mark.slow
+def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
+    kinds = check_outputs(results)
     # one summary per command, each of its documented kind
     assert kinds == {
         "summary.json": "reproduce",
@@ -113,12 +121,15 @@ def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
         assert (results / "structure" / f"camera_velocity_{name}.png").is_file()
 
 
+@pytest.mark.slow
 def test_the_reproduce_table_holds_numbers(results):
     top = json.loads((results / "summary.json").read_text())
     assert top["quick"] is True and top["settings"]["quick"] is True
     for row in top["rows"]:
-        assert set(row) == {"what", "value", "unit", "reference"}
+        assert set(row) == {"what", "value", "unit", "reference", "reference_kind"}
         assert row["value"] is None or isinstance(row["value"], float), row
+        assert isinstance(row["reference"], float), row
+        assert row["reference_kind"] in ("published", "truth", "bound", "OpenCV"), row
         assert "seed 0" not in row["what"]
     table = pd.read_parquet(results / "summary.parquet")
     assert table["value"].dtype == np.float64
@@ -142,6 +153,43 @@ def test_the_reproduce_table_holds_numbers(results):
     for name, record in structure["sets"].items():
         rows = sets[sets["set"] == name].sort_values("axis")
         np.testing.assert_allclose(rows["rms_m"], record["rms"], rtol=1e-12)
+
+
+def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatch, capsys):
+    """`visjax reproduce` on the smallest settings (each job a second or two; the full
+    `--quick` run is the slow test above): every job runs, every output follows its schema,
+    and the table has one number per row."""
+    import functools
+
+    from visjax import report
+
+    small = {
+        "geometry_scenes": (3, 3),
+        "structure_duration_s": (2.0, 2.0),
+        "euclidean_duration_s": (2.0, 2.0),
+        "testbed_sets": (["I.1"], ["I.1"]),
+        "testbed_duration_s": (2.0, 2.0),
+        "testbed_studies": (False, False),
+    }
+    monkeypatch.setattr(report, "QUICK", small)
+    monkeypatch.setattr(
+        report, "velocity_report", functools.partial(report.velocity_report, duration=1.0)
+    )
+    out = tmp_path / "results"
+    assert main(["reproduce", "--quick", "--quiet", "--format", "png", "--out", str(out)]) == 0
+    kinds = check_outputs(out)
+    assert sorted(kinds.values()) == sorted(
+        ["reproduce", "velocity", "geometry", "structure", "euclidean", "testbed"]
+    )
+    # the settings name the folder the user asked for, not the staging folder written first
+    assert read_summary(out / "summary.json")["settings"]["out"] == str(out)
+    table = pd.read_parquet(out / "summary.parquet")
+    assert table["value"].dtype == np.float64 and len(table) >= 6
+    # the reference is a number, its kind in its own column
+    assert table["reference"].dtype == np.float64 and table["reference"].notna().all()
+    assert set(table["reference_kind"]) <= {"published", "truth", "bound", "OpenCV"}
+    assert table.loc[table["what"].str.contains("z1"), "reference_kind"].tolist() == ["truth"]
+    assert "summary" in capsys.readouterr().out
 
 
 def _valid(kind="euclidean"):

@@ -75,6 +75,7 @@ def test_sliding_window_is_causal(scenes):
     assert not np.allclose(other.outputs.omega_s[-1], sol.outputs.omega_s[-1])
 
 
+@pytest.mark.slow
 def test_vmap_over_noise_seeds_flags_the_bad_one(scenes, fits):
     clean, noisy, est = scenes
     streams = [nath.stream(sc) for sc in (clean, noisy, noisy)]

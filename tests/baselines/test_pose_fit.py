@@ -99,6 +99,7 @@ def test_stated_bandwidth_is_the_minus_3db_point():
     assert abs(ratio - 1 / np.sqrt(2)) < 0.03, ratio
 
 
+@pytest.mark.slow
 def test_causal_fit_and_filter_use_only_the_past(constant, poses):
     sc, args = constant
     later = (jnp.arange(len(sc.ts)) > 200)[:, None, None]
@@ -125,6 +126,7 @@ def test_ekf_converges_noise_free(constant):
     assert err[-1].max() < 0.1 * err[20].max()
 
 
+@pytest.mark.slow
 def test_vmap_over_noise_seeds_flags_the_bad_seed(constant):
     sc, args = constant
     n, fit = len(sc.ts), dict(bandwidth_hz=20.0, causal=True, sample_interval=1e-3)

@@ -73,6 +73,7 @@ def test_chunked_equals_prepared(streams, every, unroll):
     assert a.result == RESULTS.successful
 
 
+@pytest.mark.slow
 def test_held_samples_and_dropped_frames():
     """Frames at 100 Hz under a 1 ms step (10 steps per frame, chunks of 64 steps that
     straddle frames), with dropped frames held over: equal to the prepared stream."""
@@ -90,6 +91,7 @@ def test_held_samples_and_dropped_frames():
     _close((a.ts, a.outputs, a.final_state), (b.ts, b.outputs, b.final_state))
 
 
+@pytest.mark.slow
 def test_gradient_under_both_adjoints(streams):
     """d(windowed RMS)/dK through the chunked stream under CheckpointAdjoint (its blocks
     are the chunks) and DirectAdjoint equals that of the prepared stream."""
@@ -135,6 +137,7 @@ def _temp_bytes(seconds, prepared):
     return compiled.memory_analysis().temp_size_in_bytes
 
 
+@pytest.mark.slow
 def test_memory_does_not_grow_with_the_trajectory():
     """From pixels to the final state, 2 s against 6 s at 1 kHz: the chunked stream's
     temporary buffers grow by less than 32 bytes per step (the pixels themselves, the
@@ -148,6 +151,7 @@ def test_memory_does_not_grow_with_the_trajectory():
     assert per_step[True] > 300, per_step
 
 
+@pytest.mark.slow
 def test_frame_measure_under_jit_vmap_grad(streams):
     """`FrameMeasure` is `velocity_measurements` with the scene's constants: equal values,
     and its gradient with respect to the pixels (jit of vmap of grad) matches central

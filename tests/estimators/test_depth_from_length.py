@@ -99,6 +99,7 @@ def test_the_stream_uses_the_known_length():
     assert jnp.shape(z1) == ()
 
 
+@pytest.mark.slow
 def test_any_reference_image(no_jaxtyping):
     """The reference image given apart from the frames: the run can start anywhere, and
     the measurements are those of the full stream from there on (no spike at the start)."""
@@ -148,6 +149,7 @@ def test_velocity_in_the_object_frame():
     np.testing.assert_allclose(err_obj, err_cam, rtol=0.5)
 
 
+@pytest.mark.slow
 def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
     """0.1 px of noise on 2 s of frames: the plane normal measured from them is ~1.7 deg off,
     so the default depth path (the object origin's pixel) breaks its premise check. It

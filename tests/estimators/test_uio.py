@@ -64,6 +64,7 @@ def test_reduction_oracle_without_unknown_input():
     np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-13)
 
 
+@pytest.mark.slow
 def test_vmap_over_seeds_and_sets_and_grad():
     names = ["II.1", "II.2"]
     scs = [moving_camera_scenario(n, 1.0) for n in names]

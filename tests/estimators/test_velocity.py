@@ -127,6 +127,7 @@ def test_settles_from_a_wrong_initial_estimate(sc1k):
     assert np.all(err[sol.ts >= 1.0].max(0) < 0.15)
 
 
+@pytest.mark.slow
 def test_agrees_with_numpy_reference():
     """The per-step NumPy transcription of the benchmark and visjax, first 0.5 s."""
     sc = section6_scenario(0.5, 1000.0)
@@ -147,6 +148,7 @@ def test_agrees_with_numpy_reference():
     np.testing.assert_allclose(sol.outputs.v_hat, ref, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_vmap_over_gains_and_noise_and_grad(short):
     sc, stream = short
     red = WindowRMS(0.1, 0.3, field="v_hat")
@@ -206,6 +208,7 @@ def test_gain_and_input_errors(short):
         fixed_camera_stream(sc.ts[:3], sc.pixels, sc.A, sc.R_star, sc.s[0])
 
 
+@pytest.mark.slow
 def test_unstable_steps_are_refused(short):
     """The paper's gains with one Euler step per 33 ms camera frame, and K x 10 at 1 kHz,
     diverge (states of 1e282, reported successful, in version 1): refused before running;

@@ -133,10 +133,10 @@ def test_g33_zero_is_named_and_large_pixels_are_not():
 
 
 def test_what_users_catch_outside_and_inside_jit():
-    """The README's contract: an `EquinoxRuntimeError` outside `jax.jit`; under it a
-    `JaxRuntimeError`, or a `ValueError` once the compiled function already ran without
-    error (JAX's fast path, jax-ml/jax#34083): `(RuntimeError, ValueError)` catches all,
-    and the message names the cause each time."""
+    """The documented contract (docs/errors.md): an `EquinoxRuntimeError` outside
+    `jax.jit`; under it a `JaxRuntimeError`, or a `ValueError` once the compiled function
+    already ran without error (JAX's fast path, jax-ml/jax#34083): `(RuntimeError,
+    ValueError)` catches all, and the message names the cause each time."""
     import equinox as eqx
 
     m = np.random.default_rng(0).uniform(-1, 1, (6, 2))

@@ -39,6 +39,7 @@ def test_recovers_a_known_camera_from_noisy_correspondences():
         camera_matrix_lstsq(np.ones((5, 2)), p[:5])
 
 
+@pytest.mark.slow
 def test_refined_camera_matrix_reduces_the_position_error():
     """In the style of Tables 5-1/5-2: the observer given the toolbox K_c (a perturbed
     nominal) versus K_c refined by least squares on correspondences from set I.1 (as the

@@ -46,6 +46,7 @@ def _check_tracking_and_observer(r):
 # in both workers, and each would build a module fixture again
 
 
+@pytest.mark.slow
 def test_moving_set_end_to_end():
     r = jang.testbed("II.1", duration=DURATION)
     a = np.array(jang.SETS["II.1"].vp_amplitude) * jang.UNITS["cm"]
@@ -61,6 +62,7 @@ def test_moving_set_end_to_end():
     _check_tracking_and_observer(r)
 
 
+@pytest.mark.slow
 def test_metre_reading_is_infeasible_on_a_puma():
     r = jang.testbed("I.1", units="m", duration=DURATION, track=False)
     assert not r.feasible

@@ -59,6 +59,7 @@ def test_pe_measure_detects_a_non_exciting_trajectory(runs):
     assert final_errors(runs[False]).max() > 0.02  # centimetres off after 20 s
 
 
+@pytest.mark.slow
 def test_vmap_over_noise_seeds_and_grad():
     sc = uncalibrated_scenario(1.0)
 

@@ -114,6 +114,7 @@ def test_planar_path_equals_the_closed_form():
     np.testing.assert_allclose(np.asarray(psi), omega * tau, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_planar_path_and_follow_tool_twist_differentiate(q_start):
     ts = jnp.linspace(0.0, 30.0, 301)
     v = jnp.array([0.0115, -0.013])

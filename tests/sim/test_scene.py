@@ -57,6 +57,7 @@ def test_sinusoidal_twist_is_the_derivative_of_the_pose():
     np.testing.assert_allclose(_rotation_rate(np.asarray(tr.R), dt), tr.twist[1:-1, 3:], atol=1e-6)
 
 
+@pytest.mark.slow
 def test_spline_through_poses(no_jaxtyping):
     knots = jnp.array([0.0, 0.7, 1.3, 2.0])
     R_k = jnp.stack([so3_exp(jnp.array([0.1 * k, -0.2 * k, 0.15 * k * k])) for k in range(4)])

@@ -78,6 +78,7 @@ def test_bad_arguments():
         compare({"mean": mean}, inputs, score, first_seed=-1)
 
 
+@pytest.mark.slow
 def test_velocity_and_euclidean_problems_on_data_files(tmp_path):
     """The two other problems of `visjax compare`, from data files (noise on top of the
     file's pixels): every method succeeds and scores with the estimator's own keys."""

@@ -112,6 +112,7 @@ def velocity():
     return studies.velocity_tuning(noise_px=0.1, duration=2.0)
 
 
+@pytest.mark.slow
 def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
     params = {"K": jnp.array([0.01, 1.0, 10.0]), "rho": jnp.array([0.1, 1.0, 1.0])}
     table = studies.sweep(velocity.factory, params, jnp.arange(2), metrics=velocity.metrics)
@@ -138,6 +139,7 @@ def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
     np.testing.assert_allclose(m16["rms"], one(p, key)["rms"], rtol=1e-10, atol=0)
 
 
+@pytest.mark.slow
 def test_tune_lowers_velocity_loss_tenfold_and_gradients(velocity):
     keys = jnp.arange(2)
     r = studies.tune(
@@ -231,6 +233,7 @@ print(json.dumps({{"devices": len(jax.devices()), "process": jax.process_index()
 """
 
 
+@pytest.mark.slow
 def test_two_processes_with_jax_distributed(velocity):
     """Two processes on localhost (CPU collectives by gloo), one device each, the velocity
     estimator (a full run per row): every process holds the whole table, equal to the
@@ -286,11 +289,11 @@ def test_tune_finds_minimum_in_log_parameters(method):
     assert r.loss < r.loss0 and r.converged
 
 
+@pytest.mark.slow
 def test_velocity_sweep_on_a_data_file_with_dropouts(tmp_path):
     """`velocity_tuning(data=FILE)`: the user's own file (features out of view as NaN, the
     file's own gains absent: eq. (63)); every run succeeds with finite metrics."""
-    sys.path.insert(0, os.path.join(_ROOT, "examples"))
-    from make_example_data import velocity_example
+    from tests.example_data import velocity_example
 
     data = velocity_example(duration=0.5, noise_px=0.0)
     assert np.isnan(data.pixels).any()

@@ -1,0 +1,69 @@
+"""One small smoke test for each study command (`compare`, `sweep`, `tune`) on the
+cheapest problem (the unknown input observer of Jang's thesis, set I.1, two seconds): the
+command succeeds, every output loads with pandas against its documented schema, and the
+numbers are those of the library call it makes. Product-scale runs of these commands are
+the slow tests of `tests/test_cli.py`."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from visjax.cli import main
+from visjax.io import read_summary
+
+SMALL = ["structure", "--set", "I.1", "--duration", "2", "--seeds", "1", "--noise", "0.5"]
+
+
+def _strict_json(path):
+    return json.loads(path.read_text(), parse_constant=pytest.fail)
+
+
+def test_compare_smoke(tmp_path, capsys):
+    out = tmp_path / "compare"
+    argv = ["compare", "structure", "--duration", "2", "--seeds", "1", "--noise", "0.5"]
+    assert main([*argv, "--quiet", "--out", str(out)]) == 0
+    summary = read_summary(out / "summary.json")
+    assert summary["kind"] == "compare"
+    records = pd.read_parquet(out / "records.parquet")
+    assert set(records["method"]) == {"estimator", "batch", "batch_window", "ekf"}
+    assert (records["result"] == "successful").all()
+    assert (records["latency_s_per_sample"] > 0).all()
+    rms = np.array(records["rms_last_half"].tolist())
+    assert rms.shape == (4, 3) and np.all(np.isfinite(rms)) and np.all(rms > 0)
+    assert len(pd.read_csv(out / "records.csv")) == 4
+    assert (out / "comparison.png").stat().st_size > 0
+    assert "batch_window" in capsys.readouterr().out
+
+
+def test_sweep_and_tune_smoke(tmp_path, capsys):
+    """`sweep` then `tune` of the same small problem in one process: the table's rows, the
+    best point, strict JSON; the tuned point no worse on its training seed than the
+    sweep's best it started from. The structure problem writes one folder per thesis set
+    and a top-level summary of kind `sets`."""
+    sweep_out, tune_out = tmp_path / "sweep", tmp_path / "tune"
+    grid = ["--grid", "K=0.5/1,Y=1"]
+    assert main(["sweep", *SMALL, *grid, "--quiet", "--out", str(sweep_out)]) == 0
+    assert read_summary(sweep_out / "summary.json")["kind"] == "sets"
+    one = sweep_out / "I_1"
+    table = pd.read_parquet(one / "runs.parquet")
+    assert len(table) == 2 and (table["result"] == "successful").all()
+    assert sorted(table["K"]) == [0.5, 1.0] and np.all(table["rms_worst"] > 0)
+    pd.testing.assert_frame_equal(pd.read_csv(one / "runs.csv"), table, check_dtype=False)
+    summary = _strict_json(one / "summary.json")
+    assert read_summary(one / "summary.json")["kind"] == "sweep"
+    assert summary["metric"] == "rms_worst"
+    best = table.loc[table["rms_worst"].idxmin()]
+    assert summary["best"]["params"]["K"] == best["K"]
+    assert (one / "sweep.png").stat().st_size > 0
+
+    assert main(["tune", *SMALL, *grid, "--steps", "2", "--quiet", "--out", str(tune_out)]) == 0
+    assert read_summary(tune_out / "summary.json")["kind"] == "sets"
+    one = tune_out / "I_1"
+    summary = _strict_json(one / "summary.json")
+    assert read_summary(one / "summary.json")["kind"] == "tune"
+    assert summary["training_loss"]["tuned"] <= summary["training_loss"]["sweep_best"]
+    history = pd.read_csv(one / "history.csv")
+    assert len(history) >= 2 and np.all(np.isfinite(history["loss"]))
+    assert "held-out" in capsys.readouterr().out
