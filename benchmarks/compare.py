@@ -5,7 +5,7 @@ summary keys) and the latency per new sample (median over timed runs, after comp
 of every method. The settings of every method are fixed in advance and printed with the
 results (no value chosen to match anything). Prints JSON (docs/baselines.md).
 
-    python benchmarks/compare.py [--seeds 3] [--problems velocity structure euclidean]
+    python benchmarks/compare.py [--seeds 3] [--problems velocity moving_point static_points]
 """
 
 import argparse
@@ -20,18 +20,14 @@ jax.config.update("jax_enable_x64", True)
 from visjax import studies  # noqa: E402
 
 NOISE = (0.0, 0.1, 0.5)
-FACTORIES = {
-    "velocity": studies.velocity_problem,
-    "structure": studies.structure_problem,
-    "euclidean": studies.euclidean_problem,
-}
+PROBLEMS = ("velocity", "moving_point", "static_points")
 
 
 def summarise(setup, records):
     out = {}
     for method in setup.methods:
         rows = [r for r in records if r["method"] == method]
-        good = [setup.accuracy(r) for r in rows if r["result"] == "successful"]
+        good = [r[setup.metric] for r in rows if r["result"] == "successful"]
         out[method] = {
             "failed": sum(r["result"] != "successful" for r in rows),
             setup.label: float(np.median(good)) if good else None,
@@ -44,19 +40,17 @@ def summarise(setup, records):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--problems", nargs="*", default=list(FACTORIES), choices=FACTORIES)
+    parser.add_argument("--problems", nargs="*", default=list(PROBLEMS), choices=PROBLEMS)
     args = parser.parse_args()
     report = {"seeds": args.seeds, "problems": {}}
     for name in args.problems:
         per_noise = {}
         for noise in NOISE:
-            setup = FACTORIES[name](noise_px=noise)
-            records = studies.compare(
-                setup.methods, setup.inputs, setup.score, seeds=args.seeds, updates=setup.updates
-            )
+            setup = studies.problem(name, noise_px=noise)
+            records = studies.compare(setup, seeds=args.seeds)
             per_noise[str(noise)] = {"summary": summarise(setup, records), "records": records}
             print(f"{name} at {noise} px done", file=sys.stderr)
-        report["problems"][name] = {"settings": setup.settings, "noise_px": per_noise}
+        report["problems"][name] = {"settings": setup.settings(), "noise_px": per_noise}
     json.dump(report, sys.stdout, indent=1)
 
 

@@ -2,7 +2,7 @@
 *Euclidean position estimation of static features using a moving uncalibrated camera*:
 memory for many gain settings over a long run. Prints JSON.
 
-The loss is `studies.euclidean_tuning`'s (the worst final position error of the unknown
+The loss is `papers.static_points_problem`'s (the worst final position error of the unknown
 features, 0.1 px of pixel noise, the project's scene sampled and integrated at 1 kHz); its
 gradient with respect to the two adaptation multipliers (`alpha`, `gamma`) is vmapped
 over `--batch` gain settings (log-uniform in [0.5, 2]) and run, under `CheckpointAdjoint`
@@ -28,7 +28,7 @@ jax.config.update("jax_enable_x64", True)
 
 from _memory import peak_rss_mb  # noqa: E402
 
-from visjax import studies  # noqa: E402
+from visjax import papers  # noqa: E402
 from visjax.estimators import CheckpointAdjoint, DirectAdjoint  # noqa: E402
 
 
@@ -54,7 +54,7 @@ def main():
     args = parser.parse_args()
 
     u = jax.random.uniform(jax.random.key(0), (2, args.batch), minval=-1.0, maxval=1.0)
-    params = {"alpha": 2.0 ** u[0], "gamma": 2.0 ** u[1]}
+    params = {"alpha_scale": 2.0 ** u[0], "gamma_scale": 2.0 ** u[1]}
     key = jax.random.key(7)
     out = {
         "benchmark": "gradient_memory_uncalibrated_estimator",
@@ -66,12 +66,13 @@ def main():
     }
 
     def loss_fn(adjoint):
-        setup = studies.euclidean_tuning(
+        setup = papers.static_points_problem(
             noise_px=0.1, duration=args.duration, rate_hz=1000.0, adjoint=adjoint
         )
 
         def loss(p):
-            return setup.loss(setup.factory(p, key))
+            sol = setup.solve("estimator", setup.resolve(p), setup.inputs(key))
+            return setup.metrics("estimator", sol)[setup.metric]
 
         return loss
 
@@ -94,7 +95,7 @@ def main():
             out["gradients_finite"] = bool(
                 all(np.all(np.isfinite(np.asarray(v))) for v in g.values())
             )
-            out["grad_alpha_median"] = float(np.median(np.asarray(g["alpha"])))
+            out["grad_alpha_median"] = float(np.median(np.asarray(g["alpha_scale"])))
     out["rss_peak_mb"] = rss_mb()
     out["rss_peak_over_forward"] = out["rss_peak_mb"] / out["rss_after_forward_mb"]
     d, c = out["direct_xla"], out["checkpoint_xla"]

@@ -3,7 +3,7 @@ Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity 
 fixed camera*, with noise per trajectory, so that the homography, its decomposition, e,
 J and J^-1 are recomputed from each trajectory's noisy pixels. Prints JSON.
 
-The run of one trajectory is `studies.velocity_tuning(noise_px=0.1).factory` (the section-6
+The run of one trajectory is `papers.velocity_problem(noise_px=0.1)`'s estimator (the section-6
 simulation at 1 kHz, the published gains of eq. (63), the windowed RMS reduced in the loop,
 nothing saved per step): Gaussian noise drawn for the trajectory's pixels, the stream
 (`fixed_camera_stream`: its preprocessing fused with the time loop, `chunk` frames at a
@@ -50,7 +50,7 @@ jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the tests' helpers
 
 from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
-from visjax import studies  # noqa: E402
+from visjax import papers  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     SaveAt,
     VelocityEstimator,
@@ -90,8 +90,7 @@ def main():
 
     sc = section6_scenario(args.duration, 1000.0)
     steps = sc.ts.shape[0]
-    setup = studies.velocity_tuning(noise_px=0.1, duration=args.duration, chunk=args.chunk)
-    params = {"K": jnp.array(1.0), "rho": jnp.array(1.0)}
+    setup = papers.velocity_problem(noise_px=0.1, duration=args.duration, chunk=args.chunk)
     keys = jax.random.split(jax.random.key(0), args.batch)
 
     # the study, with the chunk size of the fused preprocessing set here
@@ -117,8 +116,11 @@ def main():
     rms_rbg, codes_rbg = study(keys_rbg)
     failed += int(np.sum(np.asarray(codes_rbg) != 0))
 
-    # the same through the library's study factory (studies.velocity_tuning), for reference
-    factory = jax.jit(jax.vmap(lambda k: setup.factory(params, k).summary.rms))
+    # the same through the library's problem (papers.velocity_problem), for reference
+    params = setup.resolve()
+    factory = jax.jit(
+        jax.vmap(lambda k: setup.solve("estimator", params, setup.inputs(k)).summary.rms)
+    )
     _, factory_s = timed(factory, keys, repeats=args.repeats)
 
     noise = jax.jit(

@@ -24,20 +24,20 @@ sys.path.insert(0, sys.argv[5])
 from _memory import peak_rss_mb
 import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
-from visjax import studies
+from visjax import papers, studies
 
 batch, duration = int(sys.argv[1]), float(sys.argv[2])
 chunk, repeats = int(sys.argv[3]), int(sys.argv[4])
-setup = studies.velocity_tuning(noise_px=0.1, duration=duration)
-params = {"K": np.array([0.01]), "rho": np.array([0.1])}
+setup = papers.velocity_problem(noise_px=0.1, duration=duration)
+params = {"K_scale": np.array([0.01]), "rho_scale": np.array([0.1])}
 keys = jnp.arange(batch)
 t0 = time.perf_counter()
-table = studies.sweep(setup.factory, params, keys, metrics=setup.metrics, chunk=chunk)
+table = studies.sweep(setup, params, keys, chunk=chunk)
 first = time.perf_counter() - t0
 times = []
 for _ in range(repeats):
     t0 = time.perf_counter()
-    studies.sweep(setup.factory, params, keys, metrics=setup.metrics, chunk=chunk)
+    studies.sweep(setup, params, keys, chunk=chunk)
     times.append(time.perf_counter() - t0)
 steps = int(round(duration * 1000)) + 1
 wall = statistics.median(times)

@@ -211,7 +211,7 @@ def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch)
     import os
     import stat
 
-    from visjax import cli
+    from visjax.io import _staging
 
     locked = tmp_path / "locked"
     locked.mkdir()
@@ -223,7 +223,7 @@ def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch)
             return bool(locked.stat().st_mode & stat.S_IWUSR) and real_access(path, mode)
         return real_access(path, mode)
 
-    monkeypatch.setattr(cli.os, "access", access_as_a_user)
+    monkeypatch.setattr(_staging.os, "access", access_as_a_user)
     for out in (locked, locked / "new"):
         with pytest.raises(SystemExit) as e:
             main(["velocity", "--out", str(out)])

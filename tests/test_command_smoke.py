@@ -1,4 +1,4 @@
-"""One small smoke test for each study command (`compare`, `sweep`, `tune`) on the
+"""One small smoke test for each study command (`run`, `compare`, `sweep`, `tune`) on the
 cheapest problem (the unknown input observer of Jang's thesis, set I.1, two seconds): the
 command succeeds, every output loads with pandas against its documented schema, and the
 numbers are those of the library call it makes. Product-scale runs of these commands are
@@ -30,7 +30,7 @@ def test_compare_smoke(tmp_path, capsys):
     assert set(records["method"]) == {"estimator", "batch", "batch_window", "ekf"}
     assert (records["result"] == "successful").all()
     assert (records["latency_s_per_sample"] > 0).all()
-    rms = np.array(records["rms_last_half"].tolist())
+    rms = np.array(records["rms"].tolist())
     assert rms.shape == (4, 3) and np.all(np.isfinite(rms)) and np.all(rms > 0)
     assert len(pd.read_csv(out / "records.csv")) == 4
     assert (out / "comparison.png").stat().st_size > 0
@@ -43,19 +43,22 @@ def test_sweep_and_tune_smoke(tmp_path, capsys):
     sweep's best it started from. The structure problem writes one folder per thesis set
     and a top-level summary of kind `sets`."""
     sweep_out, tune_out = tmp_path / "sweep", tmp_path / "tune"
-    grid = ["--grid", "K=0.5/1,Y=1"]
+    grid = ["--grid", "K_scale=0.5/1,Y_scale=1"]
     assert main(["sweep", *SMALL, *grid, "--quiet", "--out", str(sweep_out)]) == 0
     assert read_summary(sweep_out / "summary.json")["kind"] == "sets"
     one = sweep_out / "I_1"
     table = pd.read_parquet(one / "runs.parquet")
     assert len(table) == 2 and (table["result"] == "successful").all()
-    assert sorted(table["K"]) == [0.5, 1.0] and np.all(table["rms_worst"] > 0)
+    assert sorted(table["K_scale"]) == [0.5, 1.0] and np.all(table["rms_worst"] > 0)
     pd.testing.assert_frame_equal(pd.read_csv(one / "runs.csv"), table, check_dtype=False)
     summary = _strict_json(one / "summary.json")
     assert read_summary(one / "summary.json")["kind"] == "sweep"
     assert summary["metric"] == "rms_worst"
     best = table.loc[table["rms_worst"].idxmin()]
-    assert summary["best"]["params"]["K"] == best["K"]
+    assert summary["best"]["params"]["K_scale"] == best["K_scale"]
+    # the absolute gains the best point stands for: the published ones times its multiplier
+    K_pub = np.array(summary["paper_gains"]["K"])
+    np.testing.assert_allclose(summary["best_gains"]["K"], best["K_scale"] * K_pub, rtol=1e-12)
     assert (one / "sweep.png").stat().st_size > 0
 
     assert main(["tune", *SMALL, *grid, "--steps", "2", "--quiet", "--out", str(tune_out)]) == 0
@@ -67,3 +70,24 @@ def test_sweep_and_tune_smoke(tmp_path, capsys):
     history = pd.read_csv(one / "history.csv")
     assert len(history) >= 2 and np.all(np.isfinite(history["loss"]))
     assert "held-out" in capsys.readouterr().out
+
+
+def test_run_smoke(tmp_path, capsys):
+    """`visjax run`: one method once; the summary's metrics are those of
+    `studies.evaluate` at the same seed, and the estimates table loads with pandas."""
+    import jax
+
+    from visjax import studies
+
+    out = tmp_path / "run"
+    argv = ["run", "moving_point", "--duration", "2", "--noise", "0.5", "--seed", "3"]
+    assert main([*argv, "--quiet", "--out", str(out)]) == 0
+    summary = read_summary(out / "summary.json")
+    assert summary["kind"] == "run" and summary["result"] == "successful"
+    problem = studies.problem("moving_point", duration=2.0, noise_px=0.5)
+    ev = studies.evaluate(problem, keys=jax.random.key(3)[None])
+    np.testing.assert_allclose(summary["metrics"]["rms"], ev.metrics["rms"][0], rtol=1e-12)
+    table = pd.read_parquet(out / "estimates.parquet")
+    assert table.columns[0] == "t" and {"position[0]", "position[2]"} <= set(table.columns)
+    assert np.all(np.diff(table["t"]) > 0) and (out / "run.png").stat().st_size > 0
+    assert "rms_worst" in capsys.readouterr().out

@@ -17,8 +17,8 @@ LAYERS = [
     "design",
     "frontend",
     "io",
-    "papers",
     "studies",
+    "papers",
 ]
 
 
@@ -29,6 +29,8 @@ def _imported_subpackages(path: pathlib.Path) -> set[str]:
             rel = path.relative_to(PACKAGE).parts
             if node.level == 2 or (node.level == 1 and len(rel) == 1):
                 found.add(node.module.split(".")[0])
+        elif isinstance(node, ast.ImportFrom) and node.level == 2 and not node.module:
+            found.update(alias.name for alias in node.names)  # `from .. import papers`
         elif isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("visjax."):
             found.add(node.module.split(".")[1])
     return found

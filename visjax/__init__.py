@@ -11,8 +11,9 @@ decomposition, calibration, the uncalibrated-camera model), `kinematics` (rigid-
 perspective dynamics), `sim` (general scene builders), `estimators` (the contract, the
 runner, the three papers' estimators), `baselines` (the same problems solved otherwise),
 `design` (the UIO's LMI, cvxpy imported lazily), `frontend` (KLT tracking, OpenCV imported
-lazily), `io` (each estimator's input as a documented file format), `papers` (each paper's
-numbers, scenario and experiment), `studies` (generic studies), and the modules `report`,
+lazily), `io` (each estimator's input as a documented file format), `studies` (generic
+studies over any problem, the registry of problems), `papers` (each paper's numbers,
+scenario, experiment and problems), and the modules `report`, `verbs`,
 `plots` and `cli`.
 """
 

@@ -84,7 +84,7 @@ def raise_or_keep(result, x, throw: bool):
 
 
 def first_failure(result, failed, code, index):
-    """"First failure wins": record `code` and `index` if nothing has failed yet
+    """ "First failure wins": record `code` and `index` if nothing has failed yet
     (`failed < 0`) and `code` is not successful; otherwise keep `result` and `failed`.
 
     **Returns:** `(result, failed)`, `failed` with its own dtype.

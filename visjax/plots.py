@@ -835,6 +835,7 @@ def plot_sweep(
     title=None,
     path=None,
     formats=("png",),
+    units=None,
 ):
     """`visjax sweep` and `visjax tune`: the metric against each parameter (log-log), one
     panel per parameter. Grey dots: every point's mean over seeds; the line: the best mean
@@ -845,8 +846,10 @@ def plot_sweep(
     `summary` is `studies.summarise(table, metric)`; `best` and `paper` are dicts with
     `params` and `metric`; `label` the metric's axis label, with its unit (in brackets, or in
     trailing parentheses, shown in brackets); `title`, `path`, `formats` as in the module's
-    docstring. **Returns:** the `Figure` (single column for one parameter, else double)."""
+    docstring; `units` name -> the parameter's unit (default: dimensionless, `-`).
+    **Returns:** the `Figure` (single column for one parameter, else double)."""
     formats = _formats(formats)
+    units = dict(units or {})
     plt = _pyplot(path)
     mean = summary[f"{metric}_mean"].to_numpy(float)
     lo = summary[f"{metric}_min"].to_numpy(float)
@@ -887,7 +890,12 @@ def plot_sweep(
                 (best, "*", "best (held-out)"),
                 (paper, "s", "paper (held-out)"),
             ):
-                if mark is not None and p in mark["params"] and np.isfinite(mark["metric"]):
+                if (
+                    mark is not None
+                    and np.ndim(mark["params"].get(p)) == 0
+                    and p in mark["params"]
+                    and np.isfinite(mark["metric"])
+                ):
                     ax.plot(
                         [mark["params"][p]],
                         [mark["metric"]],
@@ -899,7 +907,7 @@ def plot_sweep(
                     )
             ax.set_xscale("log")
             ax.set_yscale("log")
-            ax.set_xlabel(f"{p}: multiplier of the reference gain [-]")
+            ax.set_xlabel(f"{p} [{units.get(p) or '-'}]")
             ax.set_ylabel(_unit_label(label or metric))
             ax.grid(True, which="major", alpha=0.3)
             for h, lab in zip(*ax.get_legend_handles_labels()):
@@ -907,6 +915,12 @@ def plot_sweep(
         if seen:
             _legend(fig, list(seen.values()), list(seen), ncol=3)
         return _finish(fig, title, path, formats)
+
+
+def save_figure(fig, path, formats=("png",)):
+    """Write a figure made elsewhere (a problem's `figure`) in every format of `formats`
+    (the suffix of `path` is replaced by each), then close it."""
+    return _finish(fig, None, path, _formats(formats))
 
 
 def plot_tune_history(history, *, label=None, title=None, path=None, formats=("png",)):

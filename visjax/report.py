@@ -8,7 +8,6 @@ estimated trajectories go to NPZ files and tables to Parquet (`visjax.io.TABLES`
 """
 
 import datetime
-import functools
 import math
 import time
 from pathlib import Path
@@ -436,7 +435,7 @@ def structure_data_report(path, out=None, quiet: bool = False, formats=("png",))
     """The unknown input observer of Jang's thesis (eq. (3.5)) on a user's data file
     (`visjax.io.StructureData`).
 
-    The observer and its gains come from `visjax.studies.structure_observer_for_data`
+    The observer and its gains come from `visjax.papers.moving_point_observer_for_data`
     (gains designed by `design_uio_for_motion` for the file's camera motion; motion
     outside the design's model reported in `summary.json` as `unmodelled_motion`).
     Dropped frames (NaN pixels) are extrapolated from the last two seen. The observer
@@ -449,14 +448,14 @@ def structure_data_report(path, out=None, quiet: bool = False, formats=("png",))
     from ._results import RESULTS, result_names
     from .estimators import SaveAt, integration_step, moving_camera_stream, run
     from .io import StructureData
+    from .papers import moving_point_observer_for_data
     from .plots import plot_structure
-    from .studies import structure_observer_for_data
 
     data = StructureData.load(path)
     t = np.asarray(data.t, float)
     stages = _progress(3, "structure", quiet)
     stages.set_postfix_str("design the gains (LMI)")
-    observer, u, info = structure_observer_for_data(data)
+    observer, u, info = moving_point_observer_for_data(data)
     rate = info["design"]["convergence_rate_per_s"]
     stages.update()
     stages.set_postfix_str("estimate")
@@ -837,181 +836,6 @@ def euclidean_report(
     return summary
 
 
-def compare_report(
-    problem: str,
-    data=None,
-    noise: float = 0.1,
-    seeds: int = 4,
-    duration: float | None = None,
-    out=None,
-    quiet: bool = False,
-    seed: int = 0,
-    formats=("png",),
-) -> dict:
-    """`visjax compare`: the paper's estimator, its batch baselines (all frames and a
-    sliding window) and its EKF on identical noisy inputs (`visjax.studies.compare`, noise
-    seeds `seed, ..., seed + seeds - 1`), from the paper's scenario or a data file (noise
-    added on top of its pixels). Writes `summary.json` (kind `compare`: `records`, one per
-    method and seed, and `problem_settings`), `records.parquet`, `records.csv` and
-    `comparison.<format>` (accuracy and latency with their spread over seeds), and prints
-    the medians per method."""
-    started = time.perf_counter()
-    settings = dict(
-        problem=problem,
-        data=None if data is None else str(data),
-        noise=noise,
-        seeds=seeds,
-        seed=seed,
-        duration=duration,
-        formats=list(formats),
-    )
-    _enable_x64()
-    from . import studies
-
-    factories = {
-        "velocity": studies.velocity_problem,
-        "structure": studies.structure_problem,
-        "euclidean": studies.euclidean_problem,
-    }
-    if problem not in factories:
-        raise ValueError(f"unknown problem {problem!r}; choose from {list(factories)}")
-    kwargs = {} if duration is None else {"duration": duration}
-    setup = factories[problem](data=data, noise_px=noise, **kwargs)
-    records = studies.compare(
-        setup.methods,
-        setup.inputs,
-        setup.score,
-        seeds=seeds,
-        first_seed=seed,
-        updates=setup.updates,
-        progress=not quiet,
-    )
-    body = {
-        "problem": problem,
-        "data": None if data is None else str(data),
-        "noise_px": noise,
-        "seeds": seeds,
-        "problem_settings": setup.settings,
-        "records": records,
-    }
-    print(
-        f"{setup.name}: {seeds} noise seed(s) at {noise:g} px"
-        + ("" if data is None else f" on top of {data}")
-    )
-    print(f"{'method':<14}{'failed':>8}{setup.label + ' (median)':>34}{'latency/sample (s)':>20}")
-    for method in setup.methods:
-        rows = [r for r in records if r["method"] == method]
-        good = [setup.accuracy(r) for r in rows if r["result"] == "successful"]
-        acc = f"{np.median(good):.4g}" if good else "-"
-        lat = float(np.median([r["latency_s_per_sample"] for r in rows]))
-        failed = sum(r["result"] != "successful" for r in rows)
-        print(f"{method:<14}{failed:>8}{acc:>34}{lat:>20.3g}")
-    if out is not None:
-        import pandas as pd
-
-        from .plots import plot_comparison
-
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        table = pd.DataFrame(records)
-        table.to_parquet(out / "records.parquet", index=False)
-        table.to_csv(out / "records.csv", index=False)
-        plot_comparison(
-            records,
-            setup.accuracy,
-            label=setup.label,
-            title=f"{setup.name}, {noise:g} px",
-            path=out / "comparison.png",
-            formats=formats,
-        )
-    summary = _summary("compare", body, settings=settings, seed=seed, started=started, out=out)
-    if out is not None:
-        print(
-            f"wrote {out / 'summary.json'}, {out / 'records.parquet'}, {out / 'records.csv'}, "
-            f"{_files(out / 'comparison.png', formats)}"
-        )
-    return summary
-
-
-def _tuning_setups(problem, data, noise, duration, rate, sets):
-    """[(tag, TuningProblem)] of `visjax sweep` / `visjax tune`: one per thesis set for the
-    structure problem (default: all seven), else one. Set-ups are cached per process (a
-    data file by its path and modification time), so a `tune` after a `sweep` of the same
-    problem reuses its calibration and its compiled runs."""
-    import os
-
-    if problem not in ("velocity", "structure", "euclidean"):
-        raise ValueError(f"unknown problem {problem!r}; choose velocity, structure or euclidean")
-    if problem == "structure":
-        if data is not None:
-            raise ValueError(
-                "sweeps of the structure observer run on the thesis' sets (their published "
-                "gains are the reference); --data is not supported for it"
-            )
-        from .papers.jang import SETS
-
-        return [
-            (n, _tuning_setup(problem, noise, None, None, duration, None, n))
-            for n in list(sets or SETS)
-        ]
-    stamp = None if data is None else os.path.getmtime(data)
-    data = None if data is None else str(data)
-    return [(None, _tuning_setup(problem, noise, data, stamp, duration, rate, None))]
-
-
-@functools.lru_cache(maxsize=16)
-def _tuning_setup(problem, noise, data, stamp, duration, rate, set_name):
-    from . import studies
-
-    kwargs = {} if duration is None else {"duration": duration}
-    if problem == "structure":
-        return studies.structure_tuning(set_name=set_name, noise_px=noise, **kwargs)
-    if rate is not None:
-        kwargs["rate_hz"] = rate
-    make = studies.velocity_tuning if problem == "velocity" else studies.euclidean_tuning
-    return make(noise_px=noise, data=data, **kwargs)
-
-
-def _held_out(setup, points: dict, seeds: int, chunk: int, mesh, first: int = 0):
-    """The metric of each named parameter point on the held-out noise seeds
-    `first + seeds, ..., first + 2 seeds - 1` (never seen by the sweep or the tuning, which
-    use `first, ..., first + seeds - 1`): `{name: {"params", "metric", "failed"}}`
-    (`metric` the mean over the successful seeds)."""
-    import jax.numpy as jnp
-
-    from . import studies
-
-    names = list(points)
-    params = {k: np.array([float(points[n][k]) for n in names]) for k in points[names[0]]}
-    table = studies.sweep(
-        setup.factory,
-        params,
-        jnp.arange(first + seeds, first + 2 * seeds),
-        metrics=setup.metrics,
-        chunk=chunk,
-        mesh=mesh,
-    )
-    out = {}
-    for i, n in enumerate(names):
-        rows = table[table["point"] == i]
-        ok = rows["result"] == "successful"
-        out[n] = {
-            "params": {k: float(v) for k, v in points[n].items()},
-            "metric": float(rows[ok][setup.metric].mean()) if ok.any() else float("nan"),
-            "failed": int((~ok).sum()),
-        }
-    return out
-
-
-def _mesh(shard: bool):
-    if not shard:
-        return None
-    import jax
-    from jax.sharding import Mesh
-
-    return Mesh(np.array(jax.devices()), ("runs",))
-
-
 def _write_json(path, obj):
     """Strict JSON (NaN and inf as null), for files that are not summaries."""
     import json
@@ -1019,281 +843,6 @@ def _write_json(path, obj):
     from .io import finite_or_null
 
     path.write_text(json.dumps(finite_or_null(obj), indent=2, allow_nan=False))
-
-
-def _structure_lmi(setup, params) -> dict:
-    """The LMI of section 3.6 of Jang's thesis for the gains at `params` (multipliers of the
-    published ones): the Lipschitz bound they certify (`certified_lipschitz`), beside the
-    published gains' own."""
-    from .design import certified_lipschitz
-
-    lmi = setup.settings["lmi"]
-    A, C, D = (np.array(lmi[k], float) for k in ("A", "C", "D"))
-    g = setup.gains(params)
-    g0 = setup.gains(setup.paper)
-    tuned = certified_lipschitz(A, C, D, np.array(g["K"]), np.array(g["Y"]))
-    published = certified_lipschitz(A, C, D, np.array(g0["K"]), np.array(g0["Y"]))
-    return {
-        "certified_lipschitz": tuned,
-        "published_certified_lipschitz": published,
-        "satisfies_lmi": bool(tuned > 0),
-        "covers_published_bound": bool(tuned >= published * (1 - 1e-6)),
-    }
-
-
-def _one_sweep(setup, grid, seeds, chunk, mesh, quiet, first: int = 0):
-    """Sweep one problem on the training seeds `first, ..., first + seeds - 1`; returns
-    (table, summary, best)."""
-    import jax.numpy as jnp
-
-    from . import studies
-
-    params = studies.parse_grid(grid or setup.grid)
-    table = studies.sweep(
-        setup.factory,
-        params,
-        jnp.arange(first, first + seeds),
-        metrics=setup.metrics,
-        chunk=chunk,
-        mesh=mesh,
-        progress=not quiet,
-    )
-    summary = studies.summarise(table, setup.metric)
-    best = studies.best(table, setup.metric)
-    return table, summary, best
-
-
-def _study_settings(arguments: dict) -> dict:
-    """The settings of a sweep or tune command from its arguments."""
-    settings = {k: v for k, v in arguments.items() if k not in ("started",)}
-    settings["data"] = None if settings.get("data") is None else str(settings["data"])
-    settings["sets"] = None if settings.get("sets") is None else list(settings["sets"])
-    settings["formats"] = list(settings["formats"])
-    return settings
-
-
-def _study_result(problem, results, settings, seed, started, out):
-    """A sweep's or tune's result: the one summary, or for the structure problem the
-    summaries by thesis set (written as a `sets` summary at the top of `out`)."""
-    if problem == "structure":
-        summary = _summary(
-            "sets", {"sets": results}, settings=settings, seed=seed, started=started, out=out
-        )
-    else:
-        summary = results[None]
-    if out is not None:
-        print(f"wrote {out}")
-    return summary
-
-
-def _print_result(tag, setup, held, extra=""):
-    head = f"[{tag}] " if tag else ""
-    for name, r in held.items():
-        gains = ", ".join(f"{k} x {v:.3g}" for k, v in r["params"].items())
-        failed = f" ({r['failed']} held-out run(s) failed)" if r["failed"] else ""
-        print(f"{head}{name:<11} {gains:<32} held-out {setup.metric} = {r['metric']:.4g}{failed}")
-    if extra:
-        print(f"{head}{extra}")
-
-
-def sweep_report(
-    problem: str,
-    grid: str | None = None,
-    noise: float = 0.1,
-    seeds: int = 8,
-    data=None,
-    duration: float | None = None,
-    rate: float | None = None,
-    sets=None,
-    chunk: int = 64,
-    shard: bool = False,
-    out=None,
-    quiet: bool = False,
-    seed: int = 0,
-    formats=("png",),
-) -> dict:
-    """`visjax sweep`: a grid of gain multipliers (`--grid`, default the problem's) over
-    `seeds` noise seeds from `seed` (`studies.sweep`), the best point by the mean metric,
-    and the best point and the paper's gains re-measured on `seeds` held-out seeds. Writes
-    `runs.parquet`, `runs.csv`, `sweep.<format>` and `summary.json` (kind `sweep`:
-    `{"metric", "best": {"params", "metric"}, "paper": {"params", "metric"}, ...}`, the
-    metrics held-out); for the structure problem one folder per thesis set and a top-level
-    `summary.json` (kind `sets`) of them by set."""
-    started = time.perf_counter()
-    settings = _study_settings(locals())
-    _enable_x64()
-    from . import studies
-    from .plots import plot_sweep
-
-    results = {}
-    mesh = _mesh(shard)
-    for tag, setup in _tuning_setups(problem, data, noise, duration, rate, sets):
-        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet, seed)
-        held = _held_out(
-            setup, {"best": best["params"], "paper": setup.paper}, seeds, chunk, mesh, seed
-        )
-        result = {
-            "metric": setup.metric,
-            "best": {"params": held["best"]["params"], "metric": held["best"]["metric"]},
-            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
-            "problem": setup.name,
-            "grid": grid or setup.grid,
-            "noise_px": noise,
-            "seeds": seeds,
-            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
-            "best_training_metric": best["metric"],
-            "best_gains": setup.gains(best["params"]),
-            "paper_gains": setup.gains(setup.paper),
-            "failed_runs": int((table["result"] != "successful").sum()),
-            "runs": len(table),
-            "problem_settings": setup.settings,
-        }
-        if problem == "structure":
-            result["lmi"] = _structure_lmi(setup, best["params"])
-        _print_result(
-            tag, setup, held, f"{result['failed_runs']} of {len(table)} sweep runs failed"
-        )
-        folder = None
-        if out is not None:
-            folder = Path(out) if tag is None else Path(out) / tag.replace(".", "_")
-            studies.save_table(table, folder)
-            plot_sweep(
-                summary,
-                setup.metric,
-                list(setup.paper),
-                best=held["best"],
-                paper=held["paper"],
-                label=setup.label,
-                title=setup.name,
-                path=folder / "sweep.png",
-                formats=formats,
-            )
-        results[tag] = _summary(
-            "sweep", result, settings=settings, seed=seed, started=started, out=folder
-        )
-    return _study_result(problem, results, settings, seed, started, out)
-
-
-def tune_report(
-    problem: str,
-    grid: str | None = None,
-    noise: float = 0.1,
-    seeds: int = 4,
-    steps: int = 30,
-    learning_rate: float = 0.1,
-    data=None,
-    duration: float | None = None,
-    rate: float | None = None,
-    sets=None,
-    chunk: int = 64,
-    shard: bool = False,
-    out=None,
-    quiet: bool = False,
-    seed: int = 0,
-    formats=("png",),
-) -> dict:
-    """`visjax tune`: a sweep of the grid (`--grid`, default the problem's) on `seeds`
-    training seeds, then `studies.tune` (Adam on the log gains, forward-mode gradients
-    through the runner, `steps` steps) from the sweep's best point on the same seeds; the
-    tuned gains, the sweep's best and the paper's gains re-measured on `seeds` held-out
-    seeds. Writes `runs.parquet`, `runs.csv` (the sweep), `history.csv`, `sweep.png`,
-    `tune.png` and `summary.json` (`{"metric", "best": {"params", "metric"}, "paper":
-    {"params", "metric"}, ...}`, kind `tune`: `best` is the tuned point, metrics held-out);
-    training seeds `seed, ..., seed + seeds - 1`, held-out seeds the next `seeds`; for the
-    structure problem one folder per thesis set (with the LMI check of the tuned gains)
-    and a top-level `summary.json` (kind `sets`) of them by set."""
-    started = time.perf_counter()
-    settings = _study_settings(locals())
-    _enable_x64()
-    import jax.numpy as jnp
-    import optax
-    import pandas as pd
-
-    from . import studies
-    from .plots import plot_sweep, plot_tune_history
-
-    results = {}
-    mesh = _mesh(shard)
-    for tag, setup in _tuning_setups(problem, data, noise, duration, rate, sets):
-        table, summary, best = _one_sweep(setup, grid, seeds, chunk, mesh, quiet, seed)
-        tuned = studies.tune(
-            setup.factory,
-            best["params"],
-            setup.loss,
-            jnp.arange(seed, seed + seeds),
-            optimiser=optax.adam(learning_rate),
-            steps=steps,
-            progress=not quiet,
-        )
-        held = _held_out(
-            setup,
-            {"tuned": tuned.params, "sweep best": best["params"], "paper": setup.paper},
-            seeds,
-            chunk,
-            mesh,
-            seed,
-        )
-        result = {
-            "metric": setup.metric,
-            "best": {"params": held["tuned"]["params"], "metric": held["tuned"]["metric"]},
-            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
-            "sweep_best": {
-                "params": held["sweep best"]["params"],
-                "metric": held["sweep best"]["metric"],
-            },
-            "improvement_over_paper": held["paper"]["metric"] / held["tuned"]["metric"],
-            "problem": setup.name,
-            "grid": grid or setup.grid,
-            "noise_px": noise,
-            "seeds": seeds,
-            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
-            "steps": steps,
-            "optimiser": f"optax.adam({learning_rate}) on the log gains, forward mode",
-            "training_loss": {"sweep_best": tuned.loss0, "tuned": tuned.loss},
-            "tuned_gains": setup.gains(tuned.params),
-            "paper_gains": setup.gains(setup.paper),
-            "held_out_failed_runs": {k: v["failed"] for k, v in held.items()},
-            "problem_settings": setup.settings,
-        }
-        extra = (
-            f"held-out improvement over the paper's gains: x {result['improvement_over_paper']:.3g}"
-        )
-        if problem == "structure":
-            result["lmi"] = _structure_lmi(setup, tuned.params)
-            extra += (
-                f"; thesis RMS {setup.settings['thesis_rms_m']}; tuned gains satisfy the LMI "
-                f"of section 3.6: {result['lmi']['satisfies_lmi']} (certified Lipschitz bound "
-                f"{result['lmi']['certified_lipschitz']:.3g}, published gains "
-                f"{result['lmi']['published_certified_lipschitz']:.3g})"
-            )
-        _print_result(tag, setup, held, extra)
-        folder = None
-        if out is not None:
-            folder = Path(out) if tag is None else Path(out) / tag.replace(".", "_")
-            studies.save_table(table, folder)
-            pd.DataFrame(tuned.history).to_csv(folder / "history.csv", index=False)
-            plot_sweep(
-                summary,
-                setup.metric,
-                list(setup.paper),
-                best=held["tuned"],
-                paper=held["paper"],
-                label=setup.label,
-                title=setup.name,
-                path=folder / "sweep.png",
-                formats=formats,
-            )
-            plot_tune_history(
-                tuned.history,
-                label=f"training {setup.label}",
-                title=setup.name,
-                path=folder / "tune.png",
-                formats=formats,
-            )
-        results[tag] = _summary(
-            "tune", result, settings=settings, seed=seed, started=started, out=folder
-        )
-    return _study_result(problem, results, settings, seed, started, out)
 
 
 def track_report(
@@ -1666,6 +1215,26 @@ QUICK = {
     "testbed_duration_s": (30.0, 10.0),
     "testbed_studies": (True, False),
 }
+
+
+def quick_help() -> str:
+    """What `reproduce --quick` shortens (the command line's help)."""
+
+    def show(v):
+        return "all" if v is None else ("/".join(v) if isinstance(v, list) else f"{v:g}")
+
+    changes = ", ".join(
+        f"{k.replace('_', ' ')} {show(full)} -> {show(quick)}"
+        for k, (full, quick) in QUICK.items()
+        if not isinstance(full, bool)
+    )
+    return (
+        f"shorter runs: {changes}, and the testbed without its studies (the camera matrix "
+        "of section 2.3, the v_py sensitivity); the velocity simulation runs in full. "
+        "results/ then differs from the documentation's tables, which are full runs"
+    )
+
+
 """What `reproduce --quick` changes: (full, quick) per setting. The velocity simulation
 (10 s at 1 kHz) runs in full either way."""
 

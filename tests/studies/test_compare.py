@@ -84,8 +84,7 @@ def test_velocity_and_euclidean_problems_on_data_files(tmp_path):
     file's pixels): every method succeeds and scores with the estimator's own keys."""
 
     from visjax.io import VelocityData
-    from visjax.papers import chitrakaran
-    from visjax.studies import euclidean_problem, velocity_problem
+    from visjax.papers import chitrakaran, static_points_problem, velocity_problem
 
     path = euclidean_scene_file(tmp_path / "euclidean.npz", 2.0, 20.0)
     v = chitrakaran.section6_scenario(0.3, 1000.0)
@@ -100,12 +99,12 @@ def test_velocity_and_euclidean_problems_on_data_files(tmp_path):
         velocity=np.asarray(v.velocity),
     ).save(vpath)
     for factory, file, key in (
-        (euclidean_problem, path, "final_position_error_m"),
-        (velocity_problem, vpath, "rms_last_half"),
+        (static_points_problem, path, "error"),
+        (velocity_problem, vpath, "rms"),
     ):
         p = factory(data=file, noise_px=0.1)
-        records = compare(p.methods, p.inputs, p.score, seeds=1, updates=p.updates, repeats=1)
+        records = compare(p, seeds=1, repeats=1)
         assert [r["method"] for r in records] == ["estimator", "batch", "batch_window", "ekf"]
         assert all(r["result"] == "successful" for r in records), records
         assert all(np.all(np.isfinite(r[key])) for r in records)
-        assert p.settings["source"] == str(file)
+        assert p.settings()["source"] == str(file)

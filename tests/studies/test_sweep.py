@@ -19,7 +19,7 @@ import pandas as pd
 import pytest
 
 from tests.helpers import euclidean_scene_file
-from visjax import studies
+from visjax import papers, studies
 from visjax._results import RESULTS
 from visjax.estimators import CheckpointAdjoint
 
@@ -109,66 +109,78 @@ def test_bad_arguments():
 
 @pytest.fixture(scope="module")
 def velocity():
-    return studies.velocity_tuning(noise_px=0.1, duration=2.0)
+    return papers.velocity_problem(noise_px=0.1, duration=2.0)
 
 
 @pytest.mark.slow
 def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
-    params = {"K": jnp.array([0.01, 1.0, 10.0]), "rho": jnp.array([0.1, 1.0, 1.0])}
-    table = studies.sweep(velocity.factory, params, jnp.arange(2), metrics=velocity.metrics)
-    one = eqx.filter_jit(lambda p, k: velocity.metrics(velocity.factory(p, k)))
+    params = {"K_scale": jnp.array([0.01, 1.0, 10.0]), "rho_scale": jnp.array([0.1, 1.0, 1.0])}
+    table = studies.sweep(velocity, params, jnp.arange(2))
+
+    def one(p, key):
+        return eqx.filter_jit(studies.evaluate)(velocity, p, key[None]).metrics
+
     for _, row in table[table["point"] < 2].iterrows():
-        p = {"K": jnp.asarray(row["K"]), "rho": jnp.asarray(row["rho"])}
+        p = {"K_scale": jnp.asarray(row["K_scale"]), "rho_scale": jnp.asarray(row["rho_scale"])}
         m = one(p, jax.random.key(int(row["seed"])))
         np.testing.assert_allclose(
-            row[[f"rms[{i}]" for i in range(6)]].to_numpy(float), m["rms"], rtol=1e-12, atol=0
+            row[[f"rms[{i}]" for i in range(6)]].to_numpy(float), m["rms"][0], rtol=1e-12, atol=0
         )
+    # a parameter is the parameter: the gain K itself (the published one times 0.01) runs
+    # as its multiplier does
+    K63 = np.asarray(velocity.K)
+    row = table.iloc[0]
+    m = one({"K": 0.01 * K63, "rho_scale": 0.1}, jax.random.key(int(row["seed"])))
+    np.testing.assert_allclose(m["rms_worst"][0], row["rms_worst"], rtol=1e-12)
     # K x 10: (K + 1) dt = 3 > 2, past Euler's stability bound: a flagged row, no numbers
-    bad = table[table["K"] == 10.0]
+    bad = table[table["K_scale"] == 10.0]
     assert set(bad["result"]) == {"unstable_step"} and bad["rms_worst"].isna().all()
-    ok = table[table["K"] < 10.0]
+    ok = table[table["K_scale"] < 10.0]
     assert (ok["result"] == "successful").all() and np.isfinite(ok["rms_worst"]).all()
     # the stream's chunk (a speed setting) does not change a number
     for bad in (0, -3):
         with pytest.raises(ValueError, match="chunk"):
-            studies.velocity_tuning(duration=2.0, chunk=bad)
-    small = studies.velocity_tuning(noise_px=0.1, duration=2.0, chunk=16)
-    assert small.settings["chunk"] == 16 and velocity.settings["chunk"] == 256
-    p, key = {"K": jnp.array(1.0), "rho": jnp.array(1.0)}, jax.random.key(1)
-    m16 = eqx.filter_jit(lambda p, k: small.metrics(small.factory(p, k)))(p, key)
-    np.testing.assert_allclose(m16["rms"], one(p, key)["rms"], rtol=1e-10, atol=0)
+            papers.velocity_problem(duration=2.0, chunk=bad)
+    small = papers.velocity_problem(noise_px=0.1, duration=2.0, chunk=16)
+    assert small.settings()["chunk"] == 16 and velocity.settings()["chunk"] == 256
+    key = jax.random.key(1)
+    m16 = studies.evaluate(small, {}, key[None]).metrics
+    np.testing.assert_allclose(m16["rms"], one({}, key)["rms"], rtol=1e-10, atol=0)
 
 
 @pytest.mark.slow
 def test_tune_lowers_velocity_loss_tenfold_and_gradients(velocity):
     keys = jnp.arange(2)
-    r = studies.tune(
-        velocity.factory, velocity.paper, velocity.loss, keys, steps=20, optimiser=optax.adam(0.3)
-    )
+    start = {"K_scale": 1.0, "rho_scale": 1.0}
+    r = studies.tune(velocity, start, keys, steps=20, optimiser=optax.adam(0.3))
     assert r.loss0 > 1.0  # the paper's gains at 0.1 px (a metre per second)
     assert r.loss < r.loss0 / 10, (r.loss0, r.loss, r.params)
     assert pd.DataFrame(r.history)["loss"].min() == pytest.approx(r.loss)
     # forward mode (the default), reverse mode and central differences agree at a point
     # where the loss is smooth (no sign flip of the sign-based term within the step)
-    z = {"K": jnp.log(0.01), "rho": jnp.log(0.1)}
-    fwd = studies.objective(velocity.factory, velocity.loss, keys)
+    z = {"K_scale": jnp.log(0.01), "rho_scale": jnp.log(0.1)}
+    fwd = studies.objective(velocity, keys)
     g_fwd = jax.jit(jax.grad(fwd))(z)
     f = jax.jit(fwd)
     h = 1e-6
     for k in z:
         fd = (f({**z, k: z[k] + h}) - f({**z, k: z[k] - h})) / (2 * h)
         np.testing.assert_allclose(g_fwd[k], fd, rtol=1e-5)
-    # many gains: per-axis multipliers, reverse mode through the checkpointed runner; by
-    # the chain rule the per-axis log-gradients sum to the scalar multiplier's
-    ckpt = studies.velocity_tuning(noise_px=0.1, duration=2.0, adjoint=CheckpointAdjoint())
-    rev = studies.objective(ckpt.factory, ckpt.loss, keys, mode="reverse")
-    z6 = {k: jnp.full(6, v) for k, v in z.items()}
+    # many gains: the six gains of K and of rho themselves, reverse mode through the
+    # checkpointed runner; by the chain rule the per-axis log-gradients sum to the scalar
+    # multiplier's
+    ckpt = papers.velocity_problem(noise_px=0.1, duration=2.0, adjoint=CheckpointAdjoint())
+    rev = studies.objective(ckpt, keys, mode="reverse")
+    z6 = {
+        "K": jnp.log(0.01 * jnp.asarray(ckpt.K)),
+        "rho": jnp.log(0.1 * jnp.asarray(ckpt.rho)),
+    }
     g_rev = jax.jit(jax.grad(rev))(z6)
-    for k in z:
+    for k, scale in (("K", "K_scale"), ("rho", "rho_scale")):
         assert g_rev[k].shape == (6,)
-        np.testing.assert_allclose(jnp.sum(g_rev[k]), g_fwd[k], rtol=1e-9)
+        np.testing.assert_allclose(jnp.sum(g_rev[k]), g_fwd[scale], rtol=1e-9)
     with pytest.raises(ValueError, match="positive"):
-        studies.tune(velocity.factory, {"K": -1.0, "rho": 1.0}, velocity.loss, keys)
+        studies.tune(velocity, {"K_scale": -1.0, "rho_scale": 1.0}, keys)
 
 
 _SHARDED = """
@@ -224,10 +236,11 @@ import jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
 from jax.sharding import Mesh
 from visjax import studies
-setup = studies.velocity_tuning(noise_px=0.1, duration=2.0)
-params = {{"K": np.array([0.01, 1.0, 10.0]), "rho": np.array([0.1, 1.0, 1.0])}}
+from visjax import papers
+setup = papers.velocity_problem(noise_px=0.1, duration=2.0)
+params = {{"K_scale": np.array([0.01, 1.0, 10.0]), "rho_scale": np.array([0.1, 1.0, 1.0])}}
 mesh = Mesh(np.array(jax.devices()), ("runs",))
-t = studies.sweep(setup.factory, params, jnp.arange(2), metrics=setup.metrics, mesh=mesh)
+t = studies.sweep(setup, params, jnp.arange(2), mesh=mesh)
 print(json.dumps({{"devices": len(jax.devices()), "process": jax.process_index(),
     "table": t.to_json(double_precision=15)}}))
 """
@@ -256,8 +269,8 @@ def test_two_processes_with_jax_distributed(velocity):
     assert results[0]["table"] == results[1]["table"]
     sharded = pd.read_json(io.StringIO(results[0]["table"]))
     # the unsharded sweep of the module's test above (same problem, same compiled chunk)
-    params = {"K": np.array([0.01, 1.0, 10.0]), "rho": np.array([0.1, 1.0, 1.0])}
-    plain = studies.sweep(velocity.factory, params, jnp.arange(2), metrics=velocity.metrics)
+    params = {"K_scale": np.array([0.01, 1.0, 10.0]), "rho_scale": np.array([0.1, 1.0, 1.0])}
+    plain = studies.sweep(velocity, params, jnp.arange(2))
     assert list(sharded["result"]) == list(plain["result"])
     assert list(plain["result"][-2:]) == ["unstable_step"] * 2
     np.testing.assert_allclose(sharded["rms_worst"], plain["rms_worst"], rtol=1e-12)
@@ -291,36 +304,35 @@ def test_tune_finds_minimum_in_log_parameters(method):
 
 @pytest.mark.slow
 def test_velocity_sweep_on_a_data_file_with_dropouts(tmp_path):
-    """`velocity_tuning(data=FILE)`: the user's own file (features out of view as NaN, the
+    """`velocity_problem(data=FILE)`: the user's own file (features out of view as NaN, the
     file's own gains absent: eq. (63)); every run succeeds with finite metrics."""
     from tests.example_data import velocity_example
 
     data = velocity_example(duration=0.5, noise_px=0.0)
     assert np.isnan(data.pixels).any()
     path = data.save(tmp_path / "v.npz")
-    setup = studies.velocity_tuning(noise_px=0.1, data=path)
-    assert setup.settings["source"] == str(path)
+    setup = papers.velocity_problem(noise_px=0.1, data=path)
+    assert setup.settings()["source"] == str(path)
     table = studies.sweep(
-        setup.factory,
-        {"K": jnp.array([0.01, 0.1]), "rho": jnp.array([0.1, 0.1])},
+        setup,
+        {"K_scale": jnp.array([0.01, 0.1]), "rho_scale": jnp.array([0.1, 0.1])},
         jnp.arange(2),
-        metrics=setup.metrics,
     )
     assert (table["result"] == "successful").all()
     assert np.isfinite(table["rms_worst"]).all() and (table["rms_worst"] > 0).all()
 
 
 def test_euclidean_tuning_from_a_file_equals_the_scene(tmp_path):
-    """`euclidean_tuning(data=FILE)` on a file written from the project's scene gives the
+    """`static_points_problem(data=FILE)` on a file written from the project's scene gives the
     scene's own runs (same pixels, same noise per seed) to 1e-12; a gain past Euler's
     bound is a flagged row."""
     path = euclidean_scene_file(tmp_path / "euclidean.npz", 2.0, 20.0)
-    params = {"alpha": jnp.array([1.0, 30.0]), "gamma": jnp.array([1.0, 30.0])}
+    params = {"alpha_scale": jnp.array([1.0, 30.0]), "gamma_scale": jnp.array([1.0, 30.0])}
     tables = [
-        studies.sweep(s.factory, params, jnp.arange(1), metrics=s.metrics)
+        studies.sweep(s, params, jnp.arange(1))
         for s in (
-            studies.euclidean_tuning(noise_px=0.1, duration=2.0, rate_hz=20.0),
-            studies.euclidean_tuning(noise_px=0.1, data=path),
+            papers.static_points_problem(noise_px=0.1, duration=2.0, rate_hz=20.0),
+            papers.static_points_problem(noise_px=0.1, data=path),
         )
     ]
     a, b = (t.iloc[0] for t in tables)

@@ -236,6 +236,19 @@ class WindowRMS(AbstractReducer):
         z = jnp.zeros_like(e)
         return WindowSummary(sumsq=z, max=z, count=jnp.zeros((), e.dtype))
 
+    def over(self, ts, outputs, truth) -> WindowSummary:
+        """The same summary of saved outputs at the times `ts` (M,) against `truth` (M,
+        ...): the window applied to a trajectory already computed (a baseline's), so that
+        every method is scored by one windowed RMS."""
+        e = self._error(outputs, truth)
+        inside = (ts >= self.t_start) & (ts < self.t_end)
+        mask = jnp.reshape(inside, inside.shape + (1,) * (e.ndim - 1))
+        return WindowSummary(
+            sumsq=jnp.sum(jnp.where(mask, e**2, 0.0), axis=0),
+            max=jnp.max(jnp.where(mask, jnp.abs(e), 0.0), axis=0),
+            count=jnp.sum(inside).astype(e.dtype),
+        )
+
     def update(self, acc: WindowSummary, t, output, truth) -> WindowSummary:
         e = self._error(output, truth)
         inside = (t >= self.t_start) & (t < self.t_end)

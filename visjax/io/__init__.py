@@ -23,4 +23,8 @@ from ._outputs import (
     validate_summary as validate_summary,
     write_summary as write_summary,
 )
-from ._staging import staged_output as staged_output, user_path as user_path
+from ._staging import (
+    check_output_path as check_output_path,
+    staged_output as staged_output,
+    user_path as user_path,
+)

@@ -127,8 +127,17 @@ SUMMARIES = {
         "camera": ("dict", "the camera estimated at the end: `A`, `R_c`, `x_c`"),
         "final_position_error_m?": ("list[float]", "with the truth: per feature, m"),
     },
+    "run": {
+        "problem": ("str", "the problem's description (its source and noise)"),
+        "method": ("str", "the method run (the estimator, or a baseline)"),
+        "result": ("str", "the result code's name (`successful`, or why it failed)"),
+        "failed_sample": ("int", "the sample at which the run failed, -1 if it did not"),
+        "metrics": ("dict", "the problem's metrics against the truth (`null` if it failed)"),
+        "gains": ("dict", "the gains run (the problem's defaults)"),
+        "problem_settings": ("dict", "the problem's scenario and methods"),
+    },
     "compare": {
-        "problem": ("str", "velocity, structure or euclidean"),
+        "problem": ("str", "the registered problem's name (as given on the command line)"),
         "data": ("str|null", "the data file, or `null` for the paper's scenario"),
         "noise_px": ("float", "pixel noise sigma, px"),
         "seeds": ("int", "noise seeds"),
@@ -137,10 +146,13 @@ SUMMARIES = {
     },
     "sweep": {
         "metric": ("str", "the metric minimised"),
-        "best": ("dict", "`params` (gain multipliers) and held-out `metric` of the best point"),
-        "paper": ("dict", "the same for the paper's gains"),
+        "best": (
+            "dict",
+            "`params` (the grid's parameters) and held-out `metric` of the best point",
+        ),
+        "paper": ("dict", "the same for the parameters' defaults (the paper's values)"),
         "problem": ("str", "the problem's name"),
-        "grid": ("str", "the grid of gain multipliers"),
+        "grid": ("str", "the grid of the problem's parameters"),
         "noise_px": ("float", "pixel noise sigma, px"),
         "seeds": ("int", "training noise seeds"),
         "held_out_seeds": ("list[int]", "the first and last held-out seed"),
@@ -150,7 +162,7 @@ SUMMARIES = {
         "failed_runs": ("int", "sweep runs that did not succeed"),
         "runs": ("int", "sweep runs"),
         "problem_settings": ("dict", "the problem's scenario"),
-        "lmi?": ("dict", "structure problem: the LMI check of the best gains"),
+        "lmi?": ("dict", "moving_point on a thesis set: the LMI check of the best gains"),
     },
     "tune": {
         "metric": ("str", "the metric minimised"),
@@ -170,10 +182,14 @@ SUMMARIES = {
         "paper_gains": ("dict", "the paper's gains"),
         "held_out_failed_runs": ("dict", "failed held-out runs per point"),
         "problem_settings": ("dict", "the problem's scenario"),
-        "lmi?": ("dict", "structure problem: the LMI check of the tuned gains"),
+        "lmi?": ("dict", "moving_point on a thesis set: the LMI check of the tuned gains"),
     },
     "sets": {
-        "sets": ("dict", "per thesis set, the summary of its folder (its `kind` says which)"),
+        "sets": (
+            "dict",
+            "per variant of the problem (a thesis set), the summary of its folder (its "
+            "`kind` says which)",
+        ),
     },
     "testbed": {
         "units": ("str", "the unit read for the velocities of the thesis' A matrices"),
@@ -199,6 +215,10 @@ SUMMARIES = {
 }
 
 TABLES = {
+    "run/estimates.parquet": {
+        "t": "float",
+        "<output>[i]": "float (each component of each saved output of the method)",
+    },
     "geometry/scenes.parquet": {
         "scene": "int",
         "method": "str",

@@ -48,6 +48,26 @@ class _Renaming:
         return getattr(self.stream, name)
 
 
+def check_output_path(out, *, file: bool = False) -> None:
+    """An output path, checked before any work: a folder that can be created or written
+    (`file=True`: a `.npz` or `.csv` file that can be written, not a folder); `None` passes.
+    **Raises:** `ValueError` saying what is wrong."""
+    if out is None:
+        return
+    path = Path(out)
+    if file and path.suffix.lower() not in (".npz", ".csv"):
+        raise ValueError(f"--out {out!r} must end in .npz or .csv")
+    if file and path.is_dir():
+        raise ValueError(f"--out {out!r} is a folder, not a file")
+    if not file and path.exists() and not path.is_dir():
+        raise ValueError(f"--out {out!r} exists and is not a folder")
+    parent = path if path.exists() and not file else path.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"--out {out!r}: {str(parent)!r} is not writable")
+
+
 @contextlib.contextmanager
 def staged_output(final, *, file: bool = False):
     """Stage an output folder (or, with `file=True`, one output file) and move it into place

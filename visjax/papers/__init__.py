@@ -1,12 +1,54 @@
 """One module per paper: its constants, published gains and numbers, its scenario (built
-with `visjax.sim`), its experiment and metrics. Nothing outside knows a paper's numbers.
+with `visjax.sim`), its experiment and metrics; and the problems built on `visjax.studies`.
+Nothing outside knows a paper's numbers.
 
 - `chitrakaran`: Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's
-  velocity with a fixed camera* (the velocity estimator, section 6).
+  velocity with a fixed camera* (the velocity estimator, section 6). Problem: `velocity`
+  (`VelocityProblem`, `velocity_problem`).
 - `jang`: Jang's thesis on the structure of a moving point seen by a moving camera (the
-  unknown input observer, seven experiment sets).
+  unknown input observer, seven experiment sets). Problem: `moving_point`
+  (`MovingPointProblem`, `moving_point_problem`; one variant per experiment set).
 - `nath`: Nath, Dawson, Tatlicioglu, *Euclidean position estimation of static features
-  using a moving uncalibrated camera* (the adaptive least-squares estimator).
+  using a moving uncalibrated camera* (the adaptive least-squares estimator). Problem:
+  `static_points` (`StaticPointsProblem`, `static_points_problem`).
 """
 
+from .. import studies as _studies
 from . import chitrakaran as chitrakaran, jang as jang, nath as nath
+from ._moving_point import (
+    MovingPointProblem as MovingPointProblem,
+    moving_point_observer_for_data as moving_point_observer_for_data,
+    moving_point_problem as moving_point_problem,
+)
+from ._static_points import (
+    FinalEstimate as FinalEstimate,
+    StaticPointsProblem as StaticPointsProblem,
+    static_points_problem as static_points_problem,
+)
+from ._velocity import (
+    VelocityProblem as VelocityProblem,
+    velocity_observer_bandwidth_hz as velocity_observer_bandwidth_hz,
+    velocity_problem as velocity_problem,
+)
+
+_studies.register_problem(
+    "velocity",
+    velocity_problem,
+    summary="velocity of a moving planar object, fixed camera (Chitrakaran et al.)",
+    replace=True,
+)
+_studies.register_problem(
+    "moving_point",
+    moving_point_problem,
+    variants=tuple(jang.SETS),
+    aliases=("structure",),
+    summary="position of a moving point, moving camera (Jang's thesis)",
+    replace=True,
+)
+_studies.register_problem(
+    "static_points",
+    static_points_problem,
+    aliases=("euclidean",),
+    summary="positions of static features, uncalibrated moving camera (Nath et al.)",
+    replace=True,
+)

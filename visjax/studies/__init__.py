@@ -1,18 +1,28 @@
-"""Generic studies over any estimator or baseline: comparisons on identical inputs
-(`compare`), batched sweeps over gains and noise seeds (`sweep`) and gradient-based tuning
-(`tune`).
+"""Generic studies over any problem: `AbstractProblem` (one definition of "estimate X from
+Y": inputs, methods, parameters, metrics, figure), `evaluate` (one parameter point over
+noise keys, differentiable), `compare` (every method on identical inputs), `sweep`
+(batched over parameter points and noise seeds) and `tune` (gradient-based), and the
+registry of problems the command line's `run|compare|sweep|tune` verbs look up.
 
-The papers' own experiments live in `visjax.papers`.
+The papers' problems live in `visjax.papers`.
 """
 
 from ._compare import compare as compare
-from ._problems import (
-    Problem as Problem,
-    euclidean_problem as euclidean_problem,
-    structure_observer_for_data as structure_observer_for_data,
-    structure_problem as structure_problem,
-    velocity_observer_bandwidth_hz as velocity_observer_bandwidth_hz,
-    velocity_problem as velocity_problem,
+from ._problem import (
+    AbstractProblem as AbstractProblem,
+    Evaluation as Evaluation,
+    Parameter as Parameter,
+    as_default as as_default,
+    as_json as as_json,
+    evaluate as evaluate,
+    fingerprint as fingerprint,
+    held as held,
+)
+from ._registry import (
+    problem as problem,
+    problem_names as problem_names,
+    register_problem as register_problem,
+    registered as registered,
 )
 from ._sweep import (
     best as best,
@@ -25,9 +35,3 @@ from ._sweep import (
     sweep as sweep,
 )
 from ._tune import TuneResult as TuneResult, objective as objective, tune as tune
-from ._tuning import (
-    TuningProblem as TuningProblem,
-    euclidean_tuning as euclidean_tuning,
-    structure_tuning as structure_tuning,
-    velocity_tuning as velocity_tuning,
-)

@@ -8,28 +8,35 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import numpy as np
 
-from .._results import result_names
+from .._results import RESULTS, result_names
 
 
 def compare(
-    methods: Mapping[str, Callable[[Any], Any]],
-    inputs: Callable[[jax.Array], tuple[Any, Any]],
-    score: Callable[[str, Any, Any], dict],
+    methods,
+    inputs: Callable[[jax.Array], tuple[Any, Any]] | None = None,
+    score: Callable[[str, Any, Any], dict] | None = None,
     *,
     seeds: int = 4,
     first_seed: int = 0,
     updates: Mapping[str, int] | None = None,
     repeats: int = 3,
     progress: bool = False,
+    params: Mapping[str, Any] | None = None,
 ) -> list[dict]:
     """Run every method on the same inputs for each noise seed and record how it did.
 
+    `compare(problem, seeds=..., params=...)`: every method of an `AbstractProblem`
+    (its estimator and baselines, `params` overriding the defaults) on the problem's
+    noisy inputs, scored by its `metrics` (as JSON numbers; `None` for a failed run), with
+    the problem's `updates`. Or, without a problem, the functional form below.
+
     **Arguments:**
 
-    - `methods`: name -> `method(inputs) -> solution`, a pure function of the inputs (it is
-        compiled once with `equinox.filter_jit`, on the first seed). The solution must have a
-        `result` (a visjax `RESULTS` item).
+    - `methods`: an `AbstractProblem`, or name -> `method(inputs) -> solution`, a pure
+        function of the inputs (it is compiled once with `equinox.filter_jit`, on the first
+        seed). The solution must have a `result` (a visjax `RESULTS` item).
     - `inputs`: `key -> (inputs, truth)`, the noisy measurements of one seed (every method
         sees the same ones) and the ground truth for `score`.
     - `score`: `(name, solution, truth) -> dict` of accuracy numbers (JSON-able).
@@ -49,6 +56,36 @@ def compare(
     call time), `compile_s` (the first call, compilation included: `first_seed` only, else
     `None`) and the keys of `score`.
     """
+    from ._problem import AbstractProblem, as_json, method_runs
+
+    if isinstance(methods, AbstractProblem):
+        problem = methods
+        if inputs is not None or score is not None or updates is not None:
+            raise ValueError("with a problem, `compare` takes no `inputs`, `score` or `updates`.")
+
+        def problem_inputs(key):
+            return problem.inputs(key), None
+
+        def problem_score(name, sol, truth):
+            ok = bool(sol.result == RESULTS.successful)
+            values = jax.tree_util.tree_map(np.asarray, problem.metrics(name, sol))
+            ok = ok and all(np.all(np.isfinite(v)) for v in values.values())
+            return as_json(values, ok)
+
+        return compare(
+            method_runs(problem, params),
+            problem_inputs,
+            problem_score,
+            seeds=seeds,
+            first_seed=first_seed,
+            updates={m: problem.updates(m) for m in problem.methods},
+            repeats=repeats,
+            progress=progress,
+        )
+    if inputs is None or score is None:
+        raise ValueError("`compare(methods, inputs, score)`: `inputs` and `score` are needed.")
+    if params is not None:
+        raise ValueError("`params` is for `compare(problem, ...)`.")
     if seeds < 1:
         raise ValueError(f"`seeds` must be at least 1; got {seeds}.")
     if repeats < 1:

@@ -121,24 +121,33 @@ def _key_data(keys) -> np.ndarray:
 
 
 def sweep(
-    factory: Callable[[Any, jax.Array], Any],
+    factory,
     params: Any,
     keys: Any,
     *,
-    metrics: Callable[[Any], Mapping[str, jax.Array]],
+    metrics: Callable[[Any], Mapping[str, jax.Array]] | None = None,
+    method: str | None = None,
+    fixed: Mapping[str, Any] | None = None,
     chunk: int = 64,
     mesh: jax.sharding.Mesh | None = None,
     progress: bool = False,
 ):
     """Run `factory` at every parameter point for every noise seed, batched, as a table.
 
+    `sweep(problem, params, keys, method=..., fixed=...)`: one method (default: the
+    estimator) of an `AbstractProblem`; `params` names some of its parameters (the
+    points), `fixed` others (one value for every run), the rest keep their defaults. Every
+    value is checked (finite; positive where the parameter must be) before any run. A
+    compiled chunk is reused by a rebuilt problem with equal fields.
+
     **Arguments:**
 
-    - `factory`: `(params, key) -> solution`, a pure JAX function of one parameter point
-        (the pytree `params` with the leading axis removed) and one PRNG key: it builds the
-        estimator (or baseline) from the parameters, the noisy measurements from the key, and
-        runs it (`throw=False`). The solution must have a `result` (a visjax `RESULTS` item);
-        its `failed_sample`, if it has one, goes into the table.
+    - `factory`: an `AbstractProblem`, or `(params, key) -> solution`, a pure JAX function
+        of one parameter point (the pytree `params` with the leading axis removed) and one
+        PRNG key: it builds the estimator (or baseline) from the parameters, the noisy
+        measurements from the key, and runs it (`throw=False`). The solution must have a
+        `result` (a visjax `RESULTS` item); its `failed_sample`, if it has one, goes into
+        the table.
     - `params`: a pytree of arrays with a common leading axis P (the points; `grid`,
         `parse_grid` or `random_points` build one).
     - `keys`: S noise seeds: a 1-D array of ints (`jax.random.key(seed)` each) or of typed
@@ -170,6 +179,19 @@ def sweep(
     """
     import pandas as pd
 
+    from ._problem import AbstractProblem, check_values, runner
+
+    if isinstance(factory, AbstractProblem):
+        if metrics is not None:
+            raise ValueError("with a problem, `sweep` takes its metrics from the problem.")
+        if not isinstance(params, Mapping):
+            raise ValueError("`params` of a problem's sweep must be a dict name -> values.")
+        check_values(factory, params, "sweep")
+        factory, metrics = runner(factory, method, fixed)
+    elif metrics is None:
+        raise ValueError("`sweep(factory, params, keys, metrics=...)`: `metrics` is needed.")
+    elif method is not None or fixed is not None:
+        raise ValueError("`method` and `fixed` are for `sweep(problem, ...)`.")
     leaves_with_path, treedef = jax.tree_util.tree_flatten_with_path(params)
     if not leaves_with_path:
         raise ValueError("`params` has no array leaves.")

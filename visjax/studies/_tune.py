@@ -31,14 +31,21 @@ class TuneResult:
 
 
 def objective(
-    factory: Callable[[Any, jax.Array], Any],
-    loss: Callable[[Any], jax.Array],
-    keys: Any,
+    factory,
+    loss: Any,
+    keys: Any = None,
     *,
     mode: str = "forward",
+    method: str | None = None,
+    fixed: Mapping[str, Any] | None = None,
 ) -> Callable[[dict], jax.Array]:
     """The tuning objective as a function of the log parameters: `log_params -> mean over
     the seeds of loss(factory(exp(log_params), key))` (vmapped over the seeds).
+
+    `objective(problem, keys, method=..., fixed=...)`: the same for one method of an
+    `AbstractProblem` (default the estimator), its loss the headline metric
+    (`problem.metric`), the parameters not given (in `fixed`, or in the log parameters)
+    at their defaults.
 
     A failed run (any result code but `successful`) makes the objective `inf`, so that no
     optimiser mistakes a frozen state's numbers for a good loss.
@@ -52,6 +59,14 @@ def objective(
     if mode not in ("forward", "reverse"):
         raise ValueError(f"`mode` must be 'forward' or 'reverse'; got {mode!r}.")
     from .._results import RESULTS
+    from ._problem import AbstractProblem
+
+    if isinstance(factory, AbstractProblem):
+        if keys is not None:
+            raise ValueError("`objective(problem, keys)` takes two positional arguments.")
+        factory, loss, keys = (*_problem_loss(factory, method, fixed), loss)
+    elif keys is None:
+        raise ValueError("`objective(factory, loss, keys)`: `keys` is needed.")
 
     kd = jnp.asarray(_key_data(keys))
 
@@ -85,17 +100,24 @@ def objective(
 
 
 def tune(
-    factory: Callable[[Any, jax.Array], Any],
+    factory,
     params0: Mapping[str, Any],
-    loss: Callable[[Any], jax.Array],
-    keys: Any,
+    loss: Any,
+    keys: Any = None,
     *,
+    method: str | None = None,
+    fixed: Mapping[str, Any] | None = None,
     optimiser: Any = None,
     steps: int = 40,
     mode: str = "forward",
     progress: bool = False,
 ) -> TuneResult:
     """Tune positive parameters (gains) by gradient descent through the runner.
+
+    `tune(problem, params0, keys, method=..., fixed=...)`: the parameters named in
+    `params0` of one method (default: the estimator) of an `AbstractProblem`, minimising
+    the mean of its headline metric (`problem.metric`) over `keys`; `fixed` sets other
+    parameters, the rest keep their defaults. Only positive parameters can be tuned.
 
     The parameters are optimised as their logarithms ($p = e^{z}$): they stay positive and
     a step is relative (a gain spread over decades is as easy to move at 0.01 as at 100).
@@ -126,6 +148,26 @@ def tune(
     import optax
     import optimistix as optx
 
+    from ._problem import AbstractProblem, check_values
+
+    if isinstance(factory, AbstractProblem):
+        problem = factory
+        if keys is not None:
+            raise ValueError("`tune(problem, params0, keys)` takes three positional arguments.")
+        keys = loss
+        check_values(problem, params0, "tune")
+        specs = problem.parameters()
+        not_positive = [k for k in params0 if not specs[k].positive]
+        if not_positive:
+            raise ValueError(
+                f"tune: parameters {not_positive} may be negative; tune works "
+                "on the logarithms of positive parameters."
+            )
+        factory, loss = _problem_loss(problem, method, fixed)
+    elif keys is None:
+        raise ValueError("`tune(factory, params0, loss, keys)`: `keys` is needed.")
+    elif method is not None or fixed is not None:
+        raise ValueError("`method` and `fixed` are for `tune(problem, ...)`.")
     names = list(params0)
     p0 = {k: np.asarray(v, float) for k, v in params0.items()}
     for k, v in p0.items():
@@ -191,6 +233,18 @@ def tune(
             best_z, best_loss = z, value
         z, state = z_next, state_next
     return TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, True)
+
+
+def _problem_loss(problem, method, fixed):
+    """`(factory, loss)` of one method of a problem: its headline metric as the loss."""
+    from ._problem import runner
+
+    factory, metrics = runner(problem, method, fixed)
+
+    def loss(sol):
+        return metrics(sol)[problem.metric]
+
+    return factory, loss
 
 
 def _to_py(x):

@@ -1,0 +1,376 @@
+"""The `moving_point` problem: the 3-D position of a moving point seen by a moving camera
+whose velocity is measured (Jang's thesis), with the unknown input observer and its
+baselines."""
+
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..estimators import AbstractAdjoint, DirectAdjoint
+from ..studies import AbstractProblem, Parameter, as_default, held
+
+
+class MovingPointProblem(AbstractProblem):
+    """The position of a point (possibly moving) from a moving camera's pixels and measured
+    velocity (Jang's thesis). Build it with `moving_point_problem`.
+
+    Methods: `estimator`, the unknown input observer (eq. (3.5)) at 1 kHz on the held
+    30 Hz frames (the thesis' logger); `batch` and `batch_window`, triangulation over all
+    frames up to $t$ and over the last `window_s` seconds (both causal; a static point
+    model for a static set, constant velocity for a moving one); `ekf`, the inverse-depth
+    EKF (`baselines.uio_ekf`, predicted at 1 ms).
+
+    Parameters: `K` and `Y` (the observer's gains, 3 x 2: the set's published ones, or the
+    LMI design for a data file; entries of either sign) and `K_scale`, `Y_scale`,
+    multipliers of them (default 1). Metrics: `rms` (3,) per axis in metres against the
+    true position over the second half of the run (at 1 kHz for the observer, at the
+    frames for the baselines), and `rms_worst`, its largest component (the depth's, in
+    practice).
+    """
+
+    methods = ("estimator", "batch", "batch_window", "ekf")
+    metric = "rms_worst"
+    label = "worst-axis RMS position, second half (m)"
+    grid = "K_scale=0.1:10:7,Y_scale=0.1:10:7"
+
+    ts: Any  # the observer's samples (the frames held at 1 kHz for a scene)
+    frame_index: Any  # the frame held at each of `ts`
+    frame_ts: Any
+    frame_pixels: Any  # noise-free
+    frame_velocities: Any
+    Kc: Any
+    truth_ts: Any
+    truth: Any  # the true position in the observer's units (cm for a thesis set), or None
+    observer: Any  # the reference observer (the published or designed gains)
+    noise_px: float = eqx.field(static=True)
+    to_m: float = eqx.field(static=True)
+    moving: bool = eqx.field(static=True)
+    window_s: tuple = eqx.field(static=True)
+    window_frames: int = eqx.field(static=True)
+    source: str = eqx.field(static=True)
+    set_name: str | None = eqx.field(static=True, default=None)
+    adjoint: AbstractAdjoint = DirectAdjoint()
+
+    @property
+    def title(self) -> str:
+        return f"moving point (Jang's thesis), {self.source}, {self.noise_px:g} px noise"
+
+    @property
+    def scored(self) -> bool:
+        return self.truth is not None
+
+    def parameters(self) -> dict[str, Parameter]:
+        return {
+            "K": Parameter(as_default(self.observer.K), "", False, "observer gain K (3 x 2)"),
+            "Y": Parameter(as_default(self.observer.Y), "", False, "observer gain Y (3 x 2)"),
+            "K_scale": Parameter(1.0, "", True, "multiplier of K"),
+            "Y_scale": Parameter(1.0, "", True, "multiplier of Y"),
+        }
+
+    def gains(self, params) -> dict:
+        p = self.resolve(params)
+        return {
+            "K": (np.asarray(p["K"]) * np.asarray(p["K_scale"])).tolist(),
+            "Y": (np.asarray(p["Y"]) * np.asarray(p["Y_scale"])).tolist(),
+        }
+
+    def inputs(self, key):
+        from ..sim import add_pixel_noise
+
+        return {"pixels": add_pixel_noise(key, self.frame_pixels, self.noise_px)}
+
+    def _window(self):
+        from ..estimators import WindowRMS
+
+        return WindowRMS(*self.window_s, field="position")
+
+    def _frames(self, pixels):
+        from ..estimators import moving_camera_stream
+
+        return moving_camera_stream(
+            self.frame_ts, pixels, self.frame_velocities, self.Kc, dropped="extrapolate"
+        )
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        from ..baselines import triangulate_point, uio_ekf
+        from ..estimators import SaveAt, moving_camera_stream, run
+
+        pixels = inputs["pixels"]
+        if method == "estimator":
+            k = self.frame_index
+            truth = None if self.truth is None else held(self.truth_ts, self.truth, self.ts)
+            stream = moving_camera_stream(
+                self.ts, pixels[k], self.frame_velocities[k], self.Kc, truth=truth
+            )
+            obs = eqx.tree_at(
+                lambda o: (o.K, o.Y, o.K_u),
+                self.observer,
+                (
+                    params["K"] * params["K_scale"],
+                    params["Y"] * params["Y_scale"],
+                    self.observer.K_u * params["K_scale"],
+                ),
+            )
+            reducer = None if truth is None else self._window()
+            step = float(np.diff(np.asarray(self.ts)[:2])[0])
+            every = max(1, int(round(0.01 / step)))
+            return run(
+                obs,
+                stream,
+                saveat=SaveAt(every=every, outputs=outputs),
+                reducer=reducer,
+                adjoint=self.adjoint,
+                throw=False,
+            )
+        order = 1 if self.moving else 0
+        if method in ("batch", "batch_window"):
+            window = self.frame_ts.shape[0] if method == "batch" else self.window_frames
+            return triangulate_point(self._frames(pixels), window=window, order=order, throw=False)
+        if method == "ekf":
+            interval = float(np.median(np.diff(np.asarray(self.frame_ts))))
+            depth0 = 1.0 / float(np.asarray(self.observer.x3_guess))
+            return uio_ekf(
+                self._frames(pixels),
+                r_norm=max(self.noise_px, 0.05) / float(np.asarray(self.Kc)[0, 0]),
+                depth0=depth0,
+                sigma_depth0=0.5 * depth0,
+                q_velocity=interval if self.moving else 0.0,
+                sigma_velocity0=2.0 if self.moving else 0.0,
+                substeps=max(1, int(round(interval / 1e-3))),
+                throw=False,
+            )
+        raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
+
+    def metrics(self, method, solution):
+        if self.truth is None:
+            return {}
+        if method == "estimator":
+            rms = solution.summary.rms
+        else:
+            truth = held(self.truth_ts, self.truth, solution.ts)
+            rms = self._window().over(solution.ts, solution.outputs, truth).rms
+        rms = rms * self.to_m
+        return {"rms_worst": jnp.max(rms), "rms": rms}
+
+    def updates(self, method):
+        return int(self.frame_ts.shape[0])
+
+    def settings(self) -> dict:
+        out = {
+            "source": self.source,
+            "noise_px": self.noise_px,
+            "observer_step_s": float(self.ts[1] - self.ts[0]),
+            "point_model": "constant velocity" if self.moving else "static",
+            "batch": "all frames up to t (causal)",
+            "window_frames": self.window_frames,
+            "scoring_window_s": list(self.window_s),
+            "scoring": "against the true position, second half of the run (metres)",
+            "ekf_r_norm": max(self.noise_px, 0.05) / float(self.Kc[0, 0]),
+            "ekf_depth0": float(1.0 / self.observer.x3_guess),
+        }
+        if self.set_name is not None:
+            from . import jang
+
+            s = jang.SETS[self.set_name]
+            out.update(
+                set=self.set_name,
+                reference_gains="the thesis' published K and Y of the set (chapter 5)",
+                thesis_rms_m=list(s.thesis_rms),
+                lmi={
+                    "A": [list(r) for r in s.A],
+                    "C": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                    "D": [[x] for x in s.D],
+                },
+            )
+        return out
+
+    def checks(self, params) -> dict:
+        """For a thesis set: the LMI of section 3.6 for the gains at `params`, the
+        Lipschitz bound they certify (`design.certified_lipschitz`) beside the published
+        gains' own."""
+        if self.set_name is None:
+            return {}
+        from ..design import certified_lipschitz
+        from . import jang
+
+        s = jang.SETS[self.set_name]
+        A, C, D = np.array(s.A, float), np.eye(3)[:2], np.array(s.D, float)[:, None]
+        g, g0 = self.gains(params), self.gains({})
+        tuned = certified_lipschitz(A, C, D, np.array(g["K"]), np.array(g["Y"]))
+        published = certified_lipschitz(A, C, D, np.array(g0["K"]), np.array(g0["Y"]))
+        return {
+            "lmi": {
+                "certified_lipschitz": tuned,
+                "published_certified_lipschitz": published,
+                "satisfies_lmi": bool(tuned > 0),
+                "covers_published_bound": bool(tuned >= published * (1 - 1e-6)),
+            }
+        }
+
+    def check_lines(self, summary) -> list[str]:
+        if "lmi" not in summary:
+            return []
+        lmi = summary["lmi"]
+        return [
+            f"thesis RMS {self.settings()['thesis_rms_m']}; the gains satisfy the LMI of "
+            f"section 3.6: {lmi['satisfies_lmi']} (certified Lipschitz bound "
+            f"{lmi['certified_lipschitz']:.3g}, published gains "
+            f"{lmi['published_certified_lipschitz']:.3g})"
+        ]
+
+    def figure(self, method, solution):
+        import matplotlib.pyplot as plt
+
+        t = np.asarray(solution.ts)
+        est = np.asarray(solution.outputs.position) * self.to_m
+        fig, axes = plt.subplots(3, 1, figsize=(8, 6), sharex=True)
+        for i, ax in enumerate(axes):
+            if self.truth is not None:
+                ax.plot(
+                    np.asarray(self.truth_ts),
+                    np.asarray(self.truth)[:, i] * self.to_m,
+                    "k",
+                    zorder=3,
+                )
+            ax.plot(t, est[:, i], lw=0.8)
+            ax.set_ylabel("XYZ"[i] + " (m)")
+        axes[-1].set_xlabel("t (s)")
+        fig.suptitle(f"{self.title}: {method} (black: truth)")
+        fig.tight_layout()
+        return fig
+
+
+def moving_point_problem(
+    *,
+    variant: str | None = None,
+    data=None,
+    noise_px: float = 0.1,
+    duration: float = 20.0,
+    window_s: float = 1.0,
+    adjoint: AbstractAdjoint | None = None,
+) -> MovingPointProblem:
+    """The `moving_point` problem (`MovingPointProblem`) on the simulated analogue of a
+    thesis set (`variant`, default `"I.1"`, a static point; `duration` s) or on a
+    `visjax.io.StructureData` file (`data`: its observer from
+    `moving_point_observer_for_data`'s LMI design, 1 kHz on its frames), with
+    `noise_px` of pixel noise per seed.
+
+    On the moving sets the camera's velocity is constant, and then the depth of a point
+    moving in 3-D is not determined by the images (the family
+    $(\\lambda P_0, \\lambda V + (1-\\lambda)v_c)$ fits them all): the triangulation
+    reports `singular`; the observer resolves it with what it knows of the unknown input's
+    direction $D$ (eq. (3.1))."""
+    from ..sim import sample_times
+    from . import jang
+
+    if not (np.isfinite(noise_px) and noise_px >= 0):
+        raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
+    if data is not None:
+        if variant is not None:
+            raise ValueError("a thesis set (`variant`) and a data file exclude each other.")
+        from ..io import StructureData
+
+        d = StructureData.load(data)
+        observer, u, _ = moving_point_observer_for_data(d)
+        frame_ts = jnp.asarray(d.t, float)
+        t0, t1 = float(frame_ts[0]), float(frame_ts[-1])
+        ts = t0 + sample_times(t1 - t0, 1000)
+        index = np.clip(
+            np.searchsorted(np.asarray(frame_ts), np.asarray(ts) + 1e-9, side="right") - 1,
+            0,
+            frame_ts.shape[0] - 1,
+        )
+        truth = None if d.position is None else jnp.asarray(d.position, float)
+        frame_pixels = jnp.asarray(d.pixels, float)
+        interval = float(np.median(np.diff(np.asarray(frame_ts))))
+        return MovingPointProblem(
+            ts=ts,
+            frame_index=jnp.asarray(index),
+            frame_ts=frame_ts,
+            frame_pixels=frame_pixels,
+            frame_velocities=jnp.asarray(u, float),
+            Kc=jnp.asarray(d.A, float),
+            truth_ts=frame_ts,
+            truth=truth,
+            observer=observer,
+            noise_px=float(noise_px),
+            to_m=1.0,
+            moving=True,
+            window_s=(t0 + (t1 - t0) / 2, t1 + 1.0),
+            window_frames=max(2, int(round(window_s / interval))),
+            source=str(data),
+            adjoint=DirectAdjoint() if adjoint is None else adjoint,
+        )
+    set_name = "I.1" if variant is None else variant
+    if set_name not in jang.SETS:
+        raise ValueError(f"unknown set {set_name!r}; choose from {list(jang.SETS)}.")
+    sc = jang.scenario(set_name, duration)
+    interval = float(np.median(np.diff(np.asarray(sc.frame_ts))))
+    return MovingPointProblem(
+        ts=sc.ts,
+        frame_index=sc.frame_index,
+        frame_ts=sc.frame_ts,
+        frame_pixels=sc.frame_pixels,
+        frame_velocities=sc.frame_velocities,
+        Kc=sc.Kc_observer,
+        truth_ts=sc.ts,
+        truth=sc.position * 100.0,  # the observer's units: the thesis' centimetres
+        observer=jang.observer(set_name),
+        noise_px=float(noise_px),
+        to_m=0.01,
+        moving=jang.SETS[set_name].moving,
+        window_s=(duration / 2, duration + 1.0),
+        window_frames=max(2, int(round(window_s / interval))),
+        source=f"thesis set {set_name} (simulated), {duration:g} s",
+        set_name=set_name,
+        adjoint=DirectAdjoint() if adjoint is None else adjoint,
+    )
+
+
+def moving_point_observer_for_data(data):
+    """The unknown input observer of Jang's thesis for a `StructureData` file, and the
+    camera velocities at the frame times.
+
+    The camera velocities are interpolated (linearly) to the frame times; the observer's
+    $A(u)$ is the thesis' matrix of the camera velocities (`THESIS_A_U`), and its gains
+    are designed by `visjax.design.design_uio_for_motion` for the velocity range of the
+    file (10% margin) and the measured velocities (up to the first 250 frames), with
+    $D$ the file's unknown-input direction. The design takes $\\bar f = 0$ (Lipschitz
+    bound 0): exact for a camera that translates parallel to its image plane and turns
+    about its optical axis; other motion ($v_{cz}$, $\\omega_x$, $\\omega_y$) is returned
+    as `unmodelled_motion`.
+
+    **Returns:** `(observer, u, info)`: `u` (N, 6) the velocities at the frame times and
+    `info` a dict (`depth_guess_m`, `D`, `design`, `unmodelled_motion`).
+    """
+    from ..design import design_uio_for_motion
+    from ..estimators import UnknownInputObserver
+
+    t = np.asarray(data.t, float)
+    u = np.stack(
+        [np.interp(t, data.camera_t, data.camera_velocity[:, j]) for j in range(6)], axis=1
+    )
+    lo, hi = u.min(axis=0), u.max(axis=0)
+    mid, half_width = (lo + hi) / 2, (hi - lo) / 2
+    u_range = (mid - 1.1 * half_width, mid + 1.1 * half_width)
+    D = np.asarray(data.D, float) / np.linalg.norm(data.D)
+    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    frame_dt = float(np.median(np.diff(t)))
+    design, rate = design_uio_for_motion(np.zeros((3, 3)), C, D, u_range, u[:250], frame_dt)
+    depth_guess = 1.0 if data.depth_guess is None else float(data.depth_guess)
+    observer = UnknownInputObserver(
+        A=np.zeros((3, 3)), D=D, x3_guess=1.0 / depth_guess, **design.observer_fields()
+    )
+    info = {
+        "depth_guess_m": depth_guess,
+        "D": [float(x) for x in D],
+        "design": {
+            "method": "design_uio_for_motion",
+            "alpha": float(design.alpha),
+            "convergence_rate_per_s": float(rate),
+        },
+        "unmodelled_motion": float(np.max(np.abs(u[:, [2, 3, 4]]))),
+    }
+    return observer, u, info

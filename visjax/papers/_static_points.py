@@ -1,0 +1,253 @@
+"""The `static_points` problem: the Euclidean positions of static features from a moving
+uncalibrated camera (Nath, Dawson, Tatlicioglu, *Euclidean position estimation of static
+features using a moving uncalibrated camera*), with the adaptive estimator and its
+baselines."""
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..estimators import AbstractAdjoint, DirectAdjoint
+from ..studies import AbstractProblem, Parameter
+
+
+class FinalEstimate(eqx.Module):
+    """A method's solution on the `static_points` problem: `result`, `failed_sample`,
+    `omega_s` (n, 3) the final estimate of the unknown features' world positions, and,
+    when asked for (`outputs=True`), `ts` and `outputs` (the method's saved outputs)."""
+
+    result: Any
+    failed_sample: Any
+    omega_s: Any
+    ts: Any = None
+    outputs: Any = None
+
+
+class StaticPointsProblem(AbstractProblem):
+    """The world positions of static features seen by a camera on a moving platform whose
+    intrinsic and extrinsic parameters are only nominally known (Nath et al.). Build it
+    with `static_points_problem`.
+
+    Methods: `estimator`, the adaptive least-squares estimator (eqs. (37)-(51),
+    `AdaptiveStructureEstimator.from_nominal`: gains from the scene's scale, initial
+    guesses from the nominal camera, derived per run from that run's noisy stream;
+    integrated at 1 kHz on the held samples); `batch`, bundle adjustment over all frames;
+    `batch_window`, over the last `window_s` seconds every `every_s` seconds (causal);
+    `ekf`, `baselines.euclidean_ekf`; all from the same initial guesses.
+
+    Parameters: `alpha_scale` multiplies $\\alpha_c$ and $\\alpha$ (eqs. (37), (41)) and
+    `gamma_scale` the initial gains $\\eta_0$, $\\eta_1$ and $\\gamma_{s0}$ (eqs. (39),
+    (45)) of the derived gains (Nath et al. publish none for this scene). Metrics: `error`
+    (n,), each unknown feature's final position error (m), and `error_worst`, the largest.
+    """
+
+    methods = ("estimator", "batch", "batch_window", "ekf")
+    metric = "error_worst"
+    label = "worst final position error (m)"
+    grid = "alpha_scale=0.1:10:5,gamma_scale=0.1:10:5"
+
+    ts: Any
+    R_b: Any
+    x_b: Any
+    omega_c: Any
+    clean: Any  # the noise-free pixels, the known features first
+    truth: Any  # the unknown features' world positions, or None
+    A_nominal: Any
+    R_c_nominal: Any
+    x_c_nominal: Any
+    n_known: int = eqx.field(static=True)
+    noise_px: float = eqx.field(static=True)
+    dt: float | None = eqx.field(static=True)
+    window_frames: int = eqx.field(static=True)
+    every_frames: int = eqx.field(static=True)
+    source: str = eqx.field(static=True)
+    adjoint: AbstractAdjoint = DirectAdjoint()
+
+    @property
+    def title(self) -> str:
+        return (
+            f"static points, uncalibrated camera (Nath et al.), {self.source}, "
+            f"{self.noise_px:g} px noise"
+        )
+
+    @property
+    def scored(self) -> bool:
+        return self.truth is not None
+
+    def parameters(self) -> dict[str, Parameter]:
+        return {
+            "alpha_scale": Parameter(1.0, "", True, "multiplier of alpha_c and alpha"),
+            "gamma_scale": Parameter(1.0, "", True, "multiplier of eta0, eta1, gamma_s0"),
+        }
+
+    def gains(self, params) -> dict:
+        return {k: float(v) for k, v in self.resolve(params).items()}
+
+    def inputs(self, key):
+        from ..sim import add_pixel_noise
+
+        return {"pixels": add_pixel_noise(key, self.clean, self.noise_px)}
+
+    def _estimator(self, pixels):
+        from ..estimators import AdaptiveStructureEstimator, platform_stream
+
+        k = self.n_known
+        stream = platform_stream(
+            self.ts, self.R_b, self.x_b, pixels[:, k:], pixels[:, :k], self.omega_c
+        )
+        est = AdaptiveStructureEstimator.from_nominal(
+            stream, self.A_nominal, self.R_c_nominal, self.x_c_nominal, dt=self.dt
+        )
+        return stream, est
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        from ..baselines import bundle_adjustment, euclidean_ekf
+        from ..estimators import SaveAt, run
+
+        stream, est = self._estimator(inputs["pixels"])
+        if method == "estimator":
+            a, g = params["alpha_scale"], params["gamma_scale"]
+            est = eqx.tree_at(
+                lambda e: (e.alpha_c, e.alpha, e.eta0, e.eta1, e.gamma_s0),
+                est,
+                (a * est.alpha_c, a * est.alpha, g * est.eta0, g * est.eta1, g * est.gamma_s0),
+            )
+            interval = float(np.max(np.diff(np.asarray(self.ts))))
+            every = max(1, int(round(interval / (self.dt or interval))))
+            sol = run(
+                est,
+                stream,
+                dt=self.dt,
+                saveat=SaveAt(every=every, outputs=outputs),
+                adjoint=self.adjoint,
+                throw=False,
+            )
+            last = jax.tree_util.tree_map(lambda x: x[-1], stream.ys)
+            omega_s = est.output(self.ts[-1], sol.final_state, last).omega_s
+        elif method in ("batch", "batch_window"):
+            window = {} if method == "batch" else {"window": self.window_frames}
+            if method == "batch_window":
+                window["every"] = self.every_frames
+            sol = bundle_adjustment(est, stream, self.omega_c, throw=False, **window)
+            omega_s = sol.outputs.omega_s[-1]
+        elif method == "ekf":
+            sol = euclidean_ekf(
+                est, stream, self.omega_c, r_px=max(self.noise_px, 0.05), throw=False
+            )
+            omega_s = sol.outputs.omega_s[-1]
+        else:
+            raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
+        return FinalEstimate(
+            sol.result,
+            sol.failed_sample,
+            omega_s,
+            sol.ts if outputs else None,
+            sol.outputs if outputs else None,
+        )
+
+    def metrics(self, method, solution):
+        if self.truth is None:
+            return {}
+        error = jnp.linalg.norm(solution.omega_s - self.truth, axis=-1)
+        return {"error_worst": jnp.max(error), "error": error}
+
+    def updates(self, method):
+        n = int(self.ts.shape[0])
+        return {"batch": 1, "batch_window": -(-n // self.every_frames)}.get(method, n)
+
+    def settings(self) -> dict:
+        return {
+            "source": self.source,
+            "noise_px": self.noise_px,
+            "estimator": "from_nominal (gains from the scene's scale), 1 kHz on held samples",
+            "reference_gains": "from_nominal's derived gains (Nath et al. give none for "
+            "this scene)",
+            "integration_step_s": self.dt,
+            "window_frames": self.window_frames,
+            "window_every_frames": self.every_frames,
+            "ekf_r_px": max(self.noise_px, 0.05),
+            "metric": "worst final position error of the unknown features (m)",
+            "latency": "batch: one fit over all frames per call; batch_window: per fit; "
+            "others: per sample",
+        }
+
+    def figure(self, method, solution):
+        import matplotlib.pyplot as plt
+
+        t = np.asarray(solution.ts)
+        est = np.asarray(solution.outputs.omega_s)
+        fig, axes = plt.subplots(3, 1, figsize=(8, 6), sharex=True)
+        for i, ax in enumerate(axes):
+            ax.plot(t, est[:, :, i], lw=0.8)
+            if self.truth is not None:
+                for v in np.asarray(self.truth)[:, i]:
+                    ax.axhline(v, color="k", lw=0.6, ls="--")
+            ax.set_ylabel("xyz"[i] + " (m)")
+        axes[-1].set_xlabel("t (s)")
+        fig.suptitle(f"{self.title}: {method} (dashed: truth)")
+        fig.tight_layout()
+        return fig
+
+
+def static_points_problem(
+    *,
+    data=None,
+    noise_px: float = 0.1,
+    duration: float = 20.0,
+    rate_hz: float = 100.0,
+    window_s: float = 2.0,
+    every_s: float = 1.0,
+    adjoint: AbstractAdjoint | None = None,
+) -> StaticPointsProblem:
+    """The `static_points` problem (`StaticPointsProblem`) on the project's scene
+    (`papers.nath.scenario`, `duration` at `rate_hz`, the nominal camera of
+    `nath.nominal_camera`) or on a `visjax.io.EuclideanData` file, with `noise_px` of
+    pixel noise per seed. The EKF assumes the pixel noise `max(noise_px, 0.05)`; its prior
+    spreads are those of `euclidean_ekf` (a nominal camera's uncertainty)."""
+    from ..estimators import Stream, integration_step
+    from . import nath
+
+    if not (np.isfinite(noise_px) and noise_px >= 0):
+        raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
+    if data is None:
+        sc = nath.scenario(duration, rate_hz)
+        ts, R_b, x_b, omega_c = sc.ts, sc.R_b, sc.x_b, sc.omega_c
+        pixels = jnp.concatenate([sc.p_c, sc.p_s], axis=1)
+        n_known, truth, nominal = sc.p_c.shape[1], sc.omega_s, nath.nominal_camera()
+        source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz"
+    else:
+        from ..io import EuclideanData
+
+        d = EuclideanData.load(data)
+        ts, R_b, x_b, omega_c = (
+            jnp.asarray(x, float) for x in (d.t, d.platform_R, d.platform_x, d.known_features)
+        )
+        pixels, n_known = jnp.asarray(d.pixels, float), d.n_known
+        truth = None if d.features is None else jnp.asarray(d.features, float)
+        nominal = (d.A_nominal, d.R_c_nominal, d.x_c_nominal)
+        source = str(data)
+    interval = float(np.max(np.diff(np.asarray(ts))))
+    # 1 kHz on held samples; `from_nominal` derives its gains for that step (no bound here)
+    dt = integration_step(Stream(ts=ts, ys=ts), max_step=1e-3)
+    A_n, R_n, x_n = (jnp.asarray(x, float) for x in nominal)
+    return StaticPointsProblem(
+        ts=ts,
+        R_b=R_b,
+        x_b=x_b,
+        omega_c=omega_c,
+        clean=pixels,
+        truth=truth,
+        A_nominal=A_n,
+        R_c_nominal=R_n,
+        x_c_nominal=x_n,
+        n_known=int(n_known),
+        noise_px=float(noise_px),
+        dt=None if dt is None else float(dt),
+        window_frames=max(2, int(round(window_s / interval))),
+        every_frames=max(1, int(round(every_s / interval))),
+        source=source,
+        adjoint=DirectAdjoint() if adjoint is None else adjoint,
+    )

@@ -1,0 +1,329 @@
+"""The `velocity` problem: the velocity of a moving planar object seen by a fixed camera
+(Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity with a
+fixed camera*), with the paper's estimator and its baselines."""
+
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..estimators import AbstractAdjoint, DirectAdjoint
+from ..studies import AbstractProblem, Parameter, as_default, held
+
+
+def velocity_observer_bandwidth_hz(K) -> list[float]:
+    """The -3 dB bandwidth per degree of freedom of the linear part of the velocity
+    estimator of Chitrakaran et al. (eqs. (39)-(40) without the sign term): from $e$ to
+    $\\hat\\kappa$ per axis, $\\hat\\kappa = s\\,T(s)\\,e$ with
+    $T(s) = (k+1)(s+1)/(s^2 + (k+1)s + (k+1))$; the frequency where $|T| = 1/\\sqrt2$.
+    (The sign term $\\rho\\,\\mathrm{sgn}(\\tilde e)$ adds gain at small errors, so this is
+    the bandwidth for errors large against $\\rho/(k+1)$.)"""
+    out = []
+    w = np.geomspace(1e-4, 1e6, 400_001)
+    for k in np.asarray(K, float):
+        s = 1j * w
+        T = (k + 1) * (s + 1) / (s**2 + (k + 1) * s + (k + 1))
+        out.append(float(w[np.nonzero(np.abs(T) < 1 / np.sqrt(2))[0][0]] / (2 * np.pi)))
+    return out
+
+
+class VelocityProblem(AbstractProblem):
+    """The velocity of a moving planar object from a fixed camera's pixels (Chitrakaran et
+    al.). Build it with `velocity_problem`.
+
+    Methods: `estimator`, the sign-based estimator (eqs. (39)-(40)); `batch` and
+    `batch_window`, the local least-squares fit of the pose trajectory (centred, all frames
+    around $t$; causal) at the estimator's own bandwidth per degree of freedom
+    (`velocity_observer_bandwidth_hz`); `ekf`, the constant-acceleration EKF
+    (`baselines.velocity_ekf`). Each seed adds `noise_px` of Gaussian noise to the
+    pixels; the homography, its decomposition and $J$ of every frame are recomputed from
+    the noisy pixels, with $n^*$ and $z_1^*$ measured once from the noise-free pixels (the
+    calibration before the run) and shared by every method.
+
+    Parameters: `K` and `rho` (the gains of eq. (40), diagonal, 6 each; default eq. (63)
+    or the data file's), and `K_scale`, `rho_scale`, multipliers of them (default 1).
+    Metrics: `rms` (6,), the RMS error per degree of freedom over the paper's window (5-10
+    s; the second half of a shorter run), and `rms_worst`, its largest component (m/s and
+    rad/s mixed, as in the paper's Table I).
+    """
+
+    methods = ("estimator", "batch", "batch_window", "ekf")
+    metric = "rms_worst"
+    label = "worst-axis RMS over the window (m/s, rad/s)"
+    grid = "K_scale=1e-3:1e1:9,rho_scale=1e-3:1e1:9"
+
+    ts: Any
+    clean: Any
+    A: Any
+    R_star: Any
+    s1: Any
+    truth: Any
+    K: Any
+    rho: Any
+    n_star: Any
+    z1_star: Any
+    reference_pixels: Any
+    noise_px: float = eqx.field(static=True)
+    window: tuple = eqx.field(static=True)
+    bandwidths: tuple = eqx.field(static=True)
+    max_jerk: float = eqx.field(static=True)
+    dropouts: bool = eqx.field(static=True)
+    chunk: int = eqx.field(static=True)
+    source: str = eqx.field(static=True)
+    adjoint: AbstractAdjoint = DirectAdjoint()
+
+    @property
+    def title(self) -> str:
+        return f"velocity (Chitrakaran et al.), {self.source}, {self.noise_px:g} px noise"
+
+    @property
+    def scored(self) -> bool:
+        return self.truth is not None
+
+    def parameters(self) -> dict[str, Parameter]:
+        return {
+            "K": Parameter(as_default(self.K), "1/s", True, "gain K of eq. (40), diagonal"),
+            "rho": Parameter(as_default(self.rho), "", True, "gain rho of eq. (40), diagonal"),
+            "K_scale": Parameter(1.0, "", True, "multiplier of K"),
+            "rho_scale": Parameter(1.0, "", True, "multiplier of rho"),
+        }
+
+    def gains(self, params) -> dict:
+        p = self.resolve(params)
+        return {
+            "K": (np.asarray(p["K"]) * np.asarray(p["K_scale"])).tolist(),
+            "rho": (np.asarray(p["rho"]) * np.asarray(p["rho_scale"])).tolist(),
+        }
+
+    def inputs(self, key):
+        from ..sim import add_pixel_noise
+
+        return {"pixels": add_pixel_noise(key, self.clean, self.noise_px)}
+
+    def _window(self):
+        from ..estimators import WindowRMS
+
+        t0 = self.ts[0]
+        a, b = self.window
+        return WindowRMS(t0 + a, t0 + b + 1e-9, field="v_hat")
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        from ..estimators import SaveAt, VelocityEstimator, fixed_camera_stream, run
+
+        pixels = inputs["pixels"]
+        if method == "estimator":
+            stream, _, _ = fixed_camera_stream(
+                self.ts,
+                pixels,
+                self.A,
+                self.R_star,
+                self.s1,
+                n_star=self.n_star,
+                z1_star=self.z1_star,
+                reference_pixels=self.reference_pixels,
+                dropouts=self.dropouts,
+                truth=self.truth,
+                throw=False,
+                chunk=self.chunk,
+            )
+            est = VelocityEstimator(
+                K=params["K"] * params["K_scale"], rho=params["rho"] * params["rho_scale"]
+            )
+            reducer = None if self.truth is None else self._window()
+            return run(
+                est,
+                stream,
+                saveat=SaveAt(outputs=outputs),
+                reducer=reducer,
+                adjoint=self.adjoint,
+                throw=False,
+            )
+        if method in ("batch", "batch_window"):
+            return self._fit(pixels, causal=method == "batch_window")
+        if method == "ekf":
+            from ..baselines import velocity_ekf
+
+            return velocity_ekf(
+                self.ts,
+                *self._constants(pixels),
+                r_px=max(self.noise_px, 0.05),
+                max_jerk=self.max_jerk,
+                max_angular_jerk=self.max_jerk,
+                reference_pixels=self.reference_pixels,
+                throw=False,
+            )
+        raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
+
+    def _constants(self, pixels):
+        return (pixels, self.A, self.R_star, self.s1, self.n_star, self.z1_star)
+
+    def _fit(self, pixels, causal):
+        from .._results import RESULTS, first_failure
+        from ..baselines import frame_poses, velocity_smoother
+
+        args = self._constants(pixels)
+        poses = frame_poses(*args, reference_pixels=self.reference_pixels)
+        interval = float(np.median(np.diff(np.asarray(self.ts))))
+        sols = {
+            bw: velocity_smoother(
+                self.ts,
+                *args,
+                bandwidth_hz=bw,
+                causal=causal,
+                sample_interval=interval,
+                reference_pixels=self.reference_pixels,
+                poses=poses,
+                throw=False,
+            )
+            for bw in sorted(set(self.bandwidths))
+        }
+        # each degree of freedom from the fit at its own bandwidth
+        v_hat, v_object = (
+            jnp.stack(
+                [getattr(sols[bw].outputs, f)[:, i] for i, bw in enumerate(self.bandwidths)], 1
+            )
+            for f in ("v_hat", "v_object")
+        )
+        result, failed = RESULTS.successful, jnp.array(-1)
+        for sol in sols.values():  # the first failure of any of the fits
+            result, failed = first_failure(result, failed, sol.result, sol.failed_sample)
+        first = sols[self.bandwidths[0]]
+        return eqx.tree_at(
+            lambda s: (s.outputs.v_hat, s.outputs.v_object, s.result, s.failed_sample),
+            first,
+            (v_hat, v_object, result, failed),
+        )
+
+    def metrics(self, method, solution):
+        if self.truth is None:
+            return {}
+        if method == "estimator":
+            rms = solution.summary.rms
+        else:
+            truth = held(self.ts, self.truth, solution.ts)
+            rms = self._window().over(solution.ts, solution.outputs, truth).rms
+        return {"rms_worst": jnp.max(rms), "rms": rms}
+
+    def updates(self, method):
+        return 1 if method == "batch" else int(self.ts.shape[0])
+
+    def settings(self) -> dict:
+        return {
+            "source": self.source,
+            "noise_px": self.noise_px,
+            "K_reference": np.asarray(self.K).tolist(),
+            "rho_reference": np.asarray(self.rho).tolist(),
+            "window_s": list(self.window),
+            "estimator_bandwidth_hz": list(self.bandwidths),
+            "fit_bandwidth_hz": list(self.bandwidths),
+            "fit_degree": 2,
+            "ekf_r_px": max(self.noise_px, 0.05),
+            "ekf_max_jerk": self.max_jerk,
+            "n_star": np.asarray(self.n_star).tolist(),
+            "z1_star": float(self.z1_star),
+            "constants_from": "the noise-free pixels (calibration), shared by all methods",
+            "per_run": "pixel noise; homography, decomposition and J recomputed",
+            "latency": "batch: one fit over all frames per call; others: per sample",
+            "chunk": self.chunk,
+        }
+
+    def figure(self, method, solution):
+        import matplotlib.pyplot as plt
+
+        from .chitrakaran import DOF_NAMES
+
+        t = np.asarray(solution.ts)
+        est = np.asarray(solution.outputs.v_hat)
+        fig, axes = plt.subplots(2, 3, figsize=(11, 5), sharex=True)
+        for i, ax in enumerate(axes.ravel()):
+            if self.truth is not None:
+                ax.plot(np.asarray(self.ts), np.asarray(self.truth)[:, i], "k", lw=1, zorder=3)
+            ax.plot(t, est[:, i], lw=0.8)
+            ax.set_title(DOF_NAMES[i])
+        fig.suptitle(f"{self.title}: {method} (black: truth)")
+        fig.tight_layout()
+        return fig
+
+
+def velocity_problem(
+    *,
+    data=None,
+    noise_px: float = 0.1,
+    duration: float = 10.0,
+    rate_hz: float = 1000.0,
+    max_jerk: float | None = None,
+    chunk: int = 256,
+    adjoint: AbstractAdjoint | None = None,
+) -> VelocityProblem:
+    """The `velocity` problem (`VelocityProblem`) on the section-6 simulation of
+    Chitrakaran et al. (`duration` at `rate_hz`, gains of eq. (63)) or on a
+    `visjax.io.VelocityData` file (its gains, eq. (63) if none), with `noise_px` of pixel
+    noise per seed.
+
+    Stated settings: the EKF assumes the pixel noise `max(noise_px, 0.05)` and the largest
+    jerk `max_jerk` (default 0.2 m/s^3 and rad/s^3 for the paper's scenario, whose velocity
+    is 0.2 sin t; 1.0 for a file). `chunk`: frames per fused chunk of the stream
+    (`fixed_camera_stream`); fastest on a 2-core CPU at about 16,000 frames per chunk call,
+    chunk x the vmapped batch. `adjoint`: the runner's (default `DirectAdjoint()`;
+    `CheckpointAdjoint()` for reverse-mode tuning of many gains).
+    """
+    from ..estimators import fixed_camera_stream
+    from .chitrakaran import K_EQ63, RHO_EQ63, section6_scenario, window
+
+    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+        raise ValueError(f"`chunk` must be a positive int (frames per chunk); got {chunk!r}.")
+    if not (np.isfinite(noise_px) and noise_px >= 0):
+        raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
+    if data is None:
+        sc = section6_scenario(duration, rate_hz)
+        ts, clean, A, R_star, s1 = sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0]
+        truth, known_length, p_ref, K, rho = sc.velocity, None, None, K_EQ63, RHO_EQ63
+        source = f"section-6 simulation, {duration:g} s at {rate_hz:g} Hz"
+    else:
+        from ..io import VelocityData
+
+        d = VelocityData.load(data)
+        ts, clean, A, R_star, s1 = (
+            jnp.asarray(x, float) for x in (d.t, d.pixels, d.A, d.R_star, d.s1)
+        )
+        truth = None if d.velocity is None else jnp.asarray(d.velocity, float)
+        known_length = d.length
+        p_ref = None if d.reference_pixels is None else jnp.asarray(d.reference_pixels)
+        K = K_EQ63 if d.K is None else d.K
+        rho = RHO_EQ63 if d.rho is None else d.rho
+        source = str(data)
+    dropouts = bool(np.any(~np.isfinite(np.asarray(clean))))
+    _, n_star, z1_star = fixed_camera_stream(
+        ts,
+        clean,
+        A,
+        R_star,
+        s1,
+        known_length=known_length,
+        reference_pixels=p_ref,
+        dropouts=dropouts,
+    )
+    jerk = (0.2 if data is None else 1.0) if max_jerk is None else float(max_jerk)
+    K, rho = jnp.asarray(K, float), jnp.asarray(rho, float)
+    return VelocityProblem(
+        ts=ts,
+        clean=jnp.asarray(clean, float),
+        A=A,
+        R_star=R_star,
+        s1=s1,
+        truth=truth,
+        K=K,
+        rho=rho,
+        n_star=n_star,
+        z1_star=z1_star,
+        reference_pixels=p_ref,
+        noise_px=float(noise_px),
+        window=window(float(ts[-1]) - float(ts[0])),
+        bandwidths=tuple(velocity_observer_bandwidth_hz(K)),
+        max_jerk=jerk,
+        dropouts=dropouts,
+        chunk=chunk,
+        source=source,
+        adjoint=DirectAdjoint() if adjoint is None else adjoint,
+    )

@@ -1,0 +1,370 @@
+"""`AbstractProblem`: one definition of "estimate X from Y" that every study speaks.
+
+A problem holds its inputs (a scene, or a user's data file, as arrays), says how one noisy
+draw of the measurements is made from a PRNG key (`inputs`), how each method estimates
+from them (`solve`: the paper's estimator and every baseline), which parameters those
+methods take (`parameters`: defaults, units, positivity) and how a solution is scored
+(`metrics`). `evaluate`, `compare`, `sweep` and `tune` take any problem; the command line's
+`run|compare|sweep|tune` verbs take any registered one (`register_problem`).
+"""
+
+import abc
+import hashlib
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._results import RESULTS, all_finite
+
+
+class Parameter(eqx.Module):
+    """A tunable parameter of a problem's methods.
+
+    **Fields:** `default` (a float, or nested tuples of floats for an array parameter: the
+    published value where there is one); `units`; `positive` (the value must stay above 0:
+    `tune` then optimises its logarithm); `doc` (one line: what it is, where it comes
+    from). A scalar given for an array parameter is broadcast to its shape (one value for
+    every component).
+    """
+
+    default: Any = eqx.field(static=True)
+    units: str = eqx.field(static=True, default="")
+    positive: bool = eqx.field(static=True, default=True)
+    doc: str = eqx.field(static=True, default="")
+
+    @property
+    def value(self) -> np.ndarray:
+        """The default as a float array."""
+        return np.asarray(self.default, float)
+
+
+def as_default(x) -> float | tuple:
+    """A number or an array as a `Parameter.default` (a float, or nested tuples)."""
+    x = np.asarray(x, float)
+    return float(x) if x.ndim == 0 else tuple(as_default(v) for v in x)
+
+
+class AbstractProblem(eqx.Module):
+    """What a researcher means by "estimate X from Y", as one Module (no closures: a rebuilt
+    problem with equal fields reuses the compiled studies of the first).
+
+    A subclass holds the inputs as fields (arrays; Python settings as static fields) and
+    defines:
+
+    - `methods` (class variable): the names of the methods, the estimator first, then
+        its baselines;
+    - `metric` (class variable): the headline metric, a key of `metrics`, to minimise; and
+        `label`, that metric with its units (for tables and figures);
+    - `parameters()`: name -> `Parameter`;
+    - `inputs(key)`: one noisy draw of the measurements (a pytree of arrays; pure JAX;
+        every method of one seed sees the same draw);
+    - `solve(method, params, inputs, *, outputs=False)`: the method's solution (it has a
+        `result`, a visjax `RESULTS` item, never raises for a value: `throw=False`
+        inside), with `params` every parameter (defaults filled in, broadcast);
+        `outputs=True` asks for the time series as well (for figures), which must not
+        change the metrics;
+    - `metrics(method, solution)`: name -> array, against the truth the problem holds
+        (pure JAX; computed inside `vmap`).
+
+    Optional: `label` (the headline metric with its units); `grid` (the default grid of
+    `visjax sweep`, a `parse_grid` spec); `title` (a one-line description); `scored`
+    (whether there is a truth to score against; default `True`); `settings()` (every
+    stated setting, JSON-able); `updates(method)` (estimate updates per call, for the
+    latency); `gains(params)` (the gains a parameter point stands for, JSON-able: where
+    parameters are multipliers, the absolute gains); `checks(params)` (extra checks of a
+    chosen point, e.g. a stability certificate, JSON-able, merged into the sweep's and
+    tune's summaries) and `check_lines(summary)` (them, as printed lines); and
+    `figure(method, solution)` (a matplotlib figure of one solution against the truth).
+    """
+
+    methods: eqx.AbstractClassVar[tuple[str, ...]]
+    metric: eqx.AbstractClassVar[str]
+    label: ClassVar[str] = ""
+    grid: ClassVar[str] = ""
+
+    @abc.abstractmethod
+    def parameters(self) -> dict[str, Parameter]:
+        """Name -> `Parameter` of the methods' tunable parameters."""
+
+    @abc.abstractmethod
+    def inputs(self, key) -> Any:
+        """One noisy draw of the measurements from a PRNG key (pure JAX)."""
+
+    @abc.abstractmethod
+    def solve(self, method: str, params: Mapping[str, Any], inputs: Any, *, outputs=False):
+        """The solution of `method` with every parameter in `params`, on `inputs`."""
+
+    @abc.abstractmethod
+    def metrics(self, method: str, solution) -> dict[str, jax.Array]:
+        """Name -> array: how well `solution` (of `method`) did against the truth."""
+
+    @property
+    def title(self) -> str:
+        return type(self).__name__
+
+    @property
+    def scored(self) -> bool:
+        return True
+
+    def settings(self) -> dict:
+        return {}
+
+    def updates(self, method: str) -> int:
+        return 1
+
+    def gains(self, params: Mapping[str, Any]) -> dict:
+        return {k: np.asarray(v).tolist() for k, v in self.resolve(params).items()}
+
+    def checks(self, params: Mapping[str, Any]) -> dict:
+        return {}
+
+    def check_lines(self, summary: Mapping[str, Any]) -> list[str]:
+        return []
+
+    def figure(self, method: str, solution):
+        """A figure of one solution (made with `outputs=True`): each saved output field
+        over time. Problems override it to draw the truth beside the estimate."""
+        import matplotlib.pyplot as plt
+
+        fields = _output_fields(solution)
+        fig, axes = plt.subplots(len(fields), 1, figsize=(7, 2.2 * len(fields)), squeeze=False)
+        for ax, (name, values) in zip(axes[:, 0], fields.items()):
+            ax.plot(np.asarray(solution.ts), values.reshape(values.shape[0], -1))
+            ax.set_ylabel(name)
+        axes[-1, 0].set_xlabel("t (s)")
+        fig.suptitle(f"{self.title}: {method}")
+        fig.tight_layout()
+        return fig
+
+    # -- helpers every study uses ------------------------------------------------------
+
+    def defaults(self) -> dict[str, np.ndarray]:
+        """Every parameter at its default value."""
+        return {name: p.value for name, p in self.parameters().items()}
+
+    def resolve(self, params: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """`params` completed with the defaults of the parameters it does not name, each
+        broadcast to its parameter's shape (traceable; no value check).
+
+        **Raises:** `ValueError` naming an unknown parameter."""
+        specs = self.parameters()
+        params = dict(params or {})
+        unknown = sorted(set(params) - set(specs))
+        if unknown:
+            raise ValueError(
+                f"{self.title}: unknown parameter(s) {unknown}; it takes {sorted(specs)}."
+            )
+        out = {}
+        for name, spec in specs.items():
+            value = spec.value
+            if name in params:
+                given = jnp.asarray(params[name], dtype=value.dtype)
+                out[name] = jnp.broadcast_to(given, value.shape)
+            else:
+                out[name] = jnp.asarray(value)
+        return out
+
+    def check_method(self, method: str | None) -> str:
+        """The method's name (`None`: the estimator, the first); `ValueError` if unknown."""
+        if method is None:
+            return self.methods[0]
+        if method not in self.methods:
+            raise ValueError(
+                f"{self.title}: unknown method {method!r}; choose from {list(self.methods)}."
+            )
+        return method
+
+
+def _output_fields(solution) -> dict[str, np.ndarray]:
+    outputs = solution.outputs
+    if outputs is None:
+        raise ValueError("the solution saved no outputs: solve it with `outputs=True`.")
+    if isinstance(outputs, eqx.Module | dict):
+        items = outputs.items() if isinstance(outputs, dict) else vars(outputs).items()
+        return {k: np.asarray(v) for k, v in items if v is not None and np.ndim(v) >= 1}
+    return {"output": np.asarray(outputs)}
+
+
+def check_values(problem: AbstractProblem, params: Mapping[str, Any], where: str) -> None:
+    """`ValueError` (before any run) if a value of `params` is not finite, or not positive
+    for a positive parameter."""
+    specs = problem.parameters()
+    for name, value in params.items():
+        if name not in specs:
+            raise ValueError(
+                f"{where}: unknown parameter {name!r} of {problem.title}; it takes {sorted(specs)}."
+            )
+        v = np.asarray(value, float)
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{where}: parameter {name!r} has non-finite values: {v}.")
+        if specs[name].positive and np.any(v <= 0):
+            raise ValueError(f"{where}: parameter {name!r} must be positive; got {v}.")
+
+
+def fingerprint(problem: AbstractProblem) -> str:
+    """A digest of the problem: its type, its static fields and its arrays' bytes. Two
+    problems with equal fields have equal fingerprints (the studies' compilation caches
+    are keyed by it)."""
+    leaves, treedef = jax.tree_util.tree_flatten(problem)
+    h = hashlib.sha1(f"{type(problem).__module__}.{type(problem).__qualname__}".encode())
+    h.update(str(treedef).encode())
+    for leaf in leaves:
+        if isinstance(leaf, jax.Array | np.ndarray | np.generic | float | int | bool):
+            a = np.asarray(leaf)
+            h.update(f"{a.dtype}{a.shape}".encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+        else:
+            h.update(repr(leaf).encode())
+    return h.hexdigest()
+
+
+class _Run:
+    """`(point, key) -> solution` and `solution -> metrics` of one method of a problem,
+    hashable by the problem's fingerprint (the sweep's compiled chunk is cached on it)."""
+
+    def __init__(self, problem: AbstractProblem, method: str, fixed: Mapping[str, Any]):
+        self.problem, self.method = problem, method
+        self.fixed = {k: np.asarray(v, float) for k, v in fixed.items()}
+        self._key = (
+            fingerprint(problem),
+            method,
+            tuple((k, v.shape, v.tobytes()) for k, v in sorted(self.fixed.items())),
+        )
+
+    def __hash__(self):
+        return hash(self._key)
+
+    def __eq__(self, other):
+        return isinstance(other, _Run) and self._key == other._key
+
+    def __call__(self, point, key):
+        params = self.problem.resolve({**self.fixed, **point})
+        inputs = self.problem.inputs(key)
+        return self.problem.solve(self.method, params, inputs)
+
+
+class _Metrics:
+    """The metrics of one method of a problem, hashable like `_Run`."""
+
+    def __init__(self, run: _Run):
+        self.run = run
+
+    def __hash__(self):
+        return hash(("metrics", self.run._key))
+
+    def __eq__(self, other):
+        return isinstance(other, _Metrics) and self.run == other.run
+
+    def __call__(self, solution):
+        return self.run.problem.metrics(self.run.method, solution)
+
+
+def runner(problem: AbstractProblem, method: str | None = None, fixed=None):
+    """`(factory, metrics)` of one method of a problem: the pair the functional `sweep`
+    and `tune` take (`factory(point, key) -> solution`, the parameters not in `point`
+    from `fixed`, then the defaults)."""
+    method = problem.check_method(method)
+    fixed = dict(fixed or {})
+    check_values(problem, fixed, "fixed parameters")
+    run = _Run(problem, method, fixed)
+    return run, _Metrics(run)
+
+
+class Evaluation(eqx.Module):
+    """What `evaluate` returns, one entry per key: `metrics` (name -> array with a leading
+    key axis; NaN where the run failed), `result` (a `RESULTS` item per key) and
+    `failed_sample` (per key, -1 if none)."""
+
+    metrics: dict
+    result: RESULTS
+    failed_sample: jax.Array
+
+
+def evaluate(
+    problem: AbstractProblem,
+    params: Mapping[str, Any] | None = None,
+    keys: Any = None,
+    *,
+    method: str | None = None,
+) -> Evaluation:
+    """One parameter point of `problem` over noise keys: its metrics per key.
+
+    A pure JAX function of `params` (the parameters it names; the others at their
+    defaults): it works under `jit`, and `jax.grad` of a metric's mean gives the gradient
+    with respect to the gains. A failed run (any result code but `successful`, or a
+    metric that is not finite) has NaN metrics and its code, never its frozen state's
+    numbers.
+
+    **Arguments:** `problem`; `params` (name -> value, default none: every default);
+    `keys` (a 1-D array of int seeds or of typed PRNG keys; default the seed 0);
+    `method` (default: the estimator).
+    """
+    method = problem.check_method(method)
+    keys = jnp.arange(1) if keys is None else jnp.asarray(keys)
+    if not jnp.issubdtype(keys.dtype, jax.dtypes.prng_key):
+        if not jnp.issubdtype(keys.dtype, jnp.integer) or keys.ndim != 1:
+            raise ValueError(
+                "`keys` must be a 1-D array of integer seeds or of typed PRNG keys "
+                f"(jax.random.key); got dtype {keys.dtype} and shape {keys.shape}."
+            )
+        keys = jax.vmap(jax.random.key)(keys)
+    params = problem.resolve(params)
+
+    def one(key):
+        sol = problem.solve(method, params, problem.inputs(key))
+        values = {n: jnp.asarray(v) for n, v in problem.metrics(method, sol).items()}
+        result = sol.result
+        fresh = (result == RESULTS.successful) & ~all_finite(values)
+        result = RESULTS.where(fresh, RESULTS.nonfinite_output, result)
+        ok = result == RESULTS.successful
+        values = {n: jnp.where(ok, v, jnp.nan) for n, v in values.items()}
+        failed = jnp.asarray(getattr(sol, "failed_sample", -1), jnp.int32)
+        return values, result, failed
+
+    values, result, failed = jax.vmap(one)(keys)
+    return Evaluation(values, result, failed)
+
+
+def method_runs(problem: AbstractProblem, params=None) -> dict:
+    """name -> `inputs -> solution` of every method (for the functional `compare`)."""
+    resolved = problem.resolve(params)
+
+    def make(method):
+        def solve(inputs):
+            return problem.solve(method, resolved, inputs)
+
+        return solve
+
+    return {m: make(m) for m in problem.methods}
+
+
+def as_json(values: Mapping[str, Any], ok: bool) -> dict:
+    """Metrics as JSON-able numbers (a float, or a list for an array); `None` if the run
+    failed."""
+    out = {}
+    for name, v in values.items():
+        a = np.asarray(v, float)
+        out[name] = None if not ok else (float(a) if a.ndim == 0 else a.tolist())
+    return out
+
+
+def point_names(problem: AbstractProblem, names: Sequence[str]) -> None:
+    specs = problem.parameters()
+    unknown = [n for n in names if n not in specs]
+    if unknown:
+        raise ValueError(
+            f"{problem.title}: unknown parameter(s) {unknown}; it takes {sorted(specs)}."
+        )
+
+
+def held(sample_ts, values, t):
+    """`values` (one per time of `sample_ts`) held at the times `t`: the last sample at or
+    before each (1 ns of tolerance); pure JAX. How a truth sampled at one rate scores an
+    estimate saved at another."""
+    sample_ts = jnp.asarray(sample_ts)
+    k = jnp.searchsorted(sample_ts, jnp.asarray(t) + 1e-9, side="right") - 1
+    return jnp.asarray(values)[jnp.clip(k, 0, sample_ts.shape[0] - 1)]

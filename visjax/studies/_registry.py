@@ -1,0 +1,142 @@
+"""The registry of problems: a name -> a function that builds the problem, which the
+command line's `run|compare|sweep|tune PROBLEM` verbs look up.
+
+The three papers' problems are registered by `visjax.papers`. A user's problem is one line,
+`visjax.studies.register_problem("name", build)`, in code run before the study (for the
+command line: a module named with `visjax --import MODULE`, or an entry point of the group
+`visjax.problems` in the package's metadata, `name = "package.module:build"`).
+"""
+
+import dataclasses
+import inspect
+from collections.abc import Callable, Sequence
+
+from ._problem import AbstractProblem
+
+
+@dataclasses.dataclass(frozen=True)
+class Registered:
+    """A registered problem: `name`, `build` (keyword options -> `AbstractProblem`; the
+    command line passes `data`, `noise_px`, `duration`, `rate_hz` and `variant` when the
+    user gives them), `variants` (named variants the study commands run one by one when
+    none is chosen, e.g. the thesis' experiment sets; empty: none), `aliases` (other
+    command names), `summary` (one line for `--help`)."""
+
+    name: str
+    build: Callable[..., AbstractProblem]
+    variants: tuple[str, ...] = ()
+    aliases: tuple[str, ...] = ()
+    summary: str = ""
+
+    def options(self) -> set[str]:
+        """The keyword options `build` accepts."""
+        params = inspect.signature(self.build).parameters.values()
+        if any(p.kind is p.VAR_KEYWORD for p in params):
+            return {"*"}
+        return {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+
+    def check(self, data=None, duration=None, rate_hz=None, variants=None) -> None:
+        """The command line's options for this problem, checked before any work: a
+        `ValueError` names an option it does not take, an unknown variant, or a scene's
+        option given with a data file."""
+        if data is not None and (duration is not None or rate_hz is not None):
+            raise ValueError("--duration and --rate apply to the problem's scene, not to --data")
+        accepted = self.options()
+        given = {"data": data, "duration": duration, "rate_hz": rate_hz}
+        for option, value in given.items():
+            if value is not None and "*" not in accepted and option not in accepted:
+                raise ValueError(f"problem {self.name!r} takes no --{option.removesuffix('_hz')}")
+        bad = [v for v in variants or () if v not in self.variants]
+        if bad:
+            raise ValueError(
+                f"unknown variant(s) {bad} of problem {self.name!r}; choose from "
+                f"{list(self.variants)}"
+            )
+
+    def make(self, **options) -> AbstractProblem:
+        """The problem built with the options that are not `None`; a `ValueError` names
+        an option this problem does not take."""
+        given = {k: v for k, v in options.items() if v is not None}
+        accepted = self.options()
+        if "*" not in accepted:
+            bad = sorted(set(given) - accepted)
+            if bad:
+                flags = ", ".join("--" + b.removesuffix("_px").removesuffix("_hz") for b in bad)
+                raise ValueError(f"problem {self.name!r} takes no {flags}")
+        problem = self.build(**given)
+        if not isinstance(problem, AbstractProblem):
+            raise TypeError(
+                f"the builder of problem {self.name!r} returned {type(problem).__name__}, "
+                "not a visjax.studies.AbstractProblem."
+            )
+        return problem
+
+
+_REGISTRY: dict[str, Registered] = {}
+_ALIASES: dict[str, str] = {}
+_LOADED = False
+
+
+def register_problem(
+    name: str,
+    build: Callable[..., AbstractProblem],
+    *,
+    variants: Sequence[str] = (),
+    aliases: Sequence[str] = (),
+    summary: str = "",
+    replace: bool = False,
+) -> Registered:
+    """Register a problem under `name` for the command line and `problem`.
+
+    `build(**options) -> AbstractProblem`, called with the options the user gives (any of
+    `data`, `noise_px`, `duration`, `rate_hz`, `variant`); the options it does not accept
+    are refused with a clear error. A name already taken is an error unless `replace`."""
+    if not (isinstance(name, str) and name.isidentifier()):
+        raise ValueError(f"a problem's name must be an identifier; got {name!r}.")
+    if not callable(build):
+        raise TypeError(f"`build` of problem {name!r} must be callable.")
+    taken = name in _REGISTRY or name in _ALIASES
+    if taken and not replace:
+        raise ValueError(f"a problem named {name!r} is registered already (replace=True).")
+    entry = Registered(name, build, tuple(variants), tuple(aliases), summary)
+    _REGISTRY[name] = entry
+    for alias in entry.aliases:
+        _ALIASES[alias] = name
+    return entry
+
+
+def _load() -> None:
+    """The installed packages' entry points, once. (The papers' problems are registered
+    by `visjax.papers`, which `import visjax` imports: every import of `visjax.studies`
+    has run it already; `studies` never imports the layer above it.)"""
+    global _LOADED
+    if _LOADED:
+        return
+    _LOADED = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group="visjax.problems"):
+        if ep.name not in _REGISTRY:
+            register_problem(ep.name, ep.load())
+
+
+def registered(name: str) -> Registered:
+    """The registry entry of `name` (or of an alias). **Raises:** `ValueError` listing the
+    registered names."""
+    _load()
+    name = _ALIASES.get(name, name)
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown problem {name!r}; choose from {problem_names()}")
+    return _REGISTRY[name]
+
+
+def problem_names() -> list[str]:
+    """The registered problems' names."""
+    _load()
+    return sorted(_REGISTRY)
+
+
+def problem(name: str, **options) -> AbstractProblem:
+    """The registered problem `name` built with `options` (those that are `None` left
+    out)."""
+    return registered(name).make(**options)

@@ -1,0 +1,529 @@
+"""The study commands over any registered problem (`visjax.studies.register_problem`):
+`run` (one method once, with its figure), `compare` (every method on identical noisy
+inputs), `sweep` (a grid of parameters over noise seeds) and `tune` (a sweep, then
+gradient descent from its best point). The command line's `visjax run|compare|sweep|tune
+PROBLEM` call these; nothing here knows a problem.
+
+Each writes `summary.json` (its schema in `visjax.io.SUMMARIES`), its tables (Parquet and
+CSV) and figures into `out` when given (staged by the command line: `visjax.io`). A problem
+with named variants (the thesis' experiment sets) is swept and tuned variant by variant
+(all of them unless `variants` names some), one folder each, with a top-level summary of
+kind `sets`.
+"""
+
+import functools
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .report import _enable_x64, _files, _summary
+
+
+def _settings(arguments: dict) -> dict:
+    out = {k: v for k, v in arguments.items() if k != "started"}
+    for k in ("data", "out"):
+        if out.get(k) is not None:
+            out[k] = str(out[k])
+    if out.get("variants") is not None:
+        out["variants"] = list(out["variants"])
+    out["formats"] = list(out.get("formats", ()))
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _built(name, data, stamp, noise, duration, rate, variant):
+    """A problem, cached per process (a data file by its path and modification time): a
+    `tune` after a `sweep` of the same problem reuses its set-up and compiled runs."""
+    from .studies import registered
+
+    return registered(name).make(
+        data=data, noise_px=noise, duration=duration, rate_hz=rate, variant=variant
+    )
+
+
+def problems(name, data=None, noise=0.1, duration=None, rate=None, variants=None, every=True):
+    """`[(tag, problem)]`: the registered problem `name` once (tag `None`), or, for a
+    problem with named variants, once per variant (`variants`, default all of them when
+    `every`, else the problem's default). **Raises:** `ValueError` for an unknown problem,
+    variant or option."""
+    from .studies import registered
+
+    entry = registered(name)
+    stamp = None if data is None else os.path.getmtime(data)
+    data = None if data is None else str(data)
+
+    def build(variant):
+        return _built(entry.name, data, stamp, noise, duration, rate, variant)
+
+    entry.check(data, duration, rate, variants)
+    if variants:
+        return [(v, build(v)) for v in variants]
+    if entry.variants and every and data is None:
+        return [(v, build(v)) for v in entry.variants]
+    return [(None, build(None))]
+
+
+def _folder(out, tag):
+    if out is None:
+        return None
+    return Path(out) if tag is None else Path(out) / tag.replace(".", "_")
+
+
+def _result(results: dict, settings, seed, started, out):
+    """The one summary, or the summaries by variant (a `sets` summary at the top)."""
+    if list(results) == [None]:
+        summary = results[None]
+    else:
+        summary = _summary(
+            "sets", {"sets": results}, settings=settings, seed=seed, started=started, out=out
+        )
+    if out is not None:
+        print(f"wrote {out}")
+    return summary
+
+
+def run_command(
+    problem: str,
+    method: str | None = None,
+    data=None,
+    noise: float = 0.0,
+    seed: int = 0,
+    duration: float | None = None,
+    rate: float | None = None,
+    variants=None,
+    out=None,
+    quiet: bool = False,
+    formats=("png",),
+) -> dict:
+    """`visjax run PROBLEM`: one method (default the estimator) once, on the problem's
+    scene or data file with `noise` px of pixel noise (seed `seed`); prints its result and
+    metrics; writes `summary.json` (kind `run`), `estimates.parquet` (the saved outputs
+    over time, one column per component) and `run.<format>` (the problem's figure)."""
+    started = time.perf_counter()
+    settings = _settings(locals())
+    _enable_x64()
+    import jax
+
+    from ._results import result_names
+    from .studies import as_json
+
+    results = {}
+    for tag, p in problems(problem, data, noise, duration, rate, variants, every=False):
+        m = p.check_method(method)
+        params = p.resolve()
+        inputs = p.inputs(jax.random.key(seed))
+        sol = jax.block_until_ready(eqx_jit(lambda x: p.solve(m, params, x, outputs=True))(inputs))
+        code = result_names(sol.result)
+        values = jax.tree_util.tree_map(np.asarray, p.metrics(m, sol))
+        ok = code == "successful" and all(np.all(np.isfinite(v)) for v in values.values())
+        body = {
+            "problem": p.title,
+            "method": m,
+            "result": code,
+            "failed_sample": int(np.asarray(getattr(sol, "failed_sample", -1))),
+            "metrics": as_json(values, ok),
+            "gains": p.gains({}),
+            "problem_settings": p.settings(),
+        }
+        head = f"[{tag}] " if tag else ""
+        print(f"{head}{p.title}: {m}, {code}")
+        for k, v in body["metrics"].items():
+            print(f"{head}  {k} = {v}")
+        folder = _folder(out, tag)
+        if folder is not None:
+            import pandas as pd
+
+            from .plots import save_figure
+
+            folder.mkdir(parents=True, exist_ok=True)
+            pd.DataFrame(_trajectory(sol)).to_parquet(folder / "estimates.parquet", index=False)
+            save_figure(p.figure(m, sol), folder / "run.png", formats)
+        results[tag] = _summary(
+            "run", body, settings=settings, seed=seed, started=started, out=folder
+        )
+    return _result(results, settings, seed, started, out)
+
+
+def eqx_jit(fn):
+    import equinox as eqx
+
+    return eqx.filter_jit(fn)
+
+
+def _trajectory(sol) -> dict:
+    """The saved outputs of a solution as table columns: `t`, then each output field's
+    components (`name[i]`, `name[i,j]`)."""
+    from .studies._sweep import _columns
+
+    table = {"t": np.asarray(sol.ts)}
+    outputs = sol.outputs
+    items = outputs.items() if isinstance(outputs, dict) else vars(outputs).items()
+    for name, v in items:
+        if v is None or np.ndim(v) < 1:
+            continue
+        v = np.asarray(v)
+        if v.shape[0] == table["t"].shape[0]:
+            table.update(_columns(name, v))
+    return table
+
+
+def compare_command(
+    problem: str,
+    data=None,
+    noise: float = 0.1,
+    seeds: int = 4,
+    duration: float | None = None,
+    out=None,
+    quiet: bool = False,
+    seed: int = 0,
+    formats=("png",),
+    rate: float | None = None,
+    variants=None,
+) -> dict:
+    """`visjax compare PROBLEM`: every method of the problem (the estimator, its batch
+    baselines, its EKF) on identical noisy inputs (`visjax.studies.compare`, noise seeds
+    `seed, ..., seed + seeds - 1`), from the problem's scene or a data file (noise added
+    on top of its pixels). Writes `summary.json` (kind `compare`: `records`, one per method
+    and seed, and `problem_settings`), `records.parquet`, `records.csv` and
+    `comparison.<format>` (accuracy and latency with their spread over seeds), and prints
+    the medians per method."""
+    started = time.perf_counter()
+    settings = _settings(locals())
+    _enable_x64()
+    import pandas as pd
+
+    from . import studies
+    from .plots import plot_comparison
+
+    results = {}
+    for tag, p in problems(problem, data, noise, duration, rate, variants, every=False):
+        records = studies.compare(p, seeds=seeds, first_seed=seed, progress=not quiet)
+        body = {
+            "problem": problem,
+            "data": None if data is None else str(data),
+            "noise_px": noise,
+            "seeds": seeds,
+            "problem_settings": p.settings(),
+            "records": records,
+        }
+        head = f"[{tag}] " if tag else ""
+        label = p.label or p.metric
+        print(f"{head}{p.title}: {seeds} noise seed(s); {p.metric}: {label}")
+        print(f"{'method':<14}{'failed':>8}{p.metric + ' (median)':>24}{'latency/sample (s)':>20}")
+        for m in p.methods:
+            rows = [r for r in records if r["method"] == m]
+            good = [r[p.metric] for r in rows if r["result"] == "successful" and r[p.metric]]
+            acc = f"{np.median(good):.4g}" if good else "-"
+            lat = float(np.median([r["latency_s_per_sample"] for r in rows]))
+            failed = sum(r["result"] != "successful" for r in rows)
+            print(f"{m:<14}{failed:>8}{acc:>24}{lat:>20.3g}")
+        folder = _folder(out, tag)
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            table = pd.DataFrame(records)
+            table.to_parquet(folder / "records.parquet", index=False)
+            table.to_csv(folder / "records.csv", index=False)
+            plot_comparison(
+                records,
+                lambda r, metric=p.metric: r[metric] if r[metric] is not None else float("nan"),
+                label=label,
+                title=p.title,
+                path=folder / "comparison.png",
+                formats=formats,
+            )
+            print(
+                f"wrote {folder / 'summary.json'}, {folder / 'records.parquet'}, "
+                f"{folder / 'records.csv'}, {_files(folder / 'comparison.png', formats)}"
+            )
+        results[tag] = _summary(
+            "compare", body, settings=settings, seed=seed, started=started, out=folder
+        )
+    if list(results) == [None]:
+        return results[None]
+    return _result(results, settings, seed, started, out)
+
+
+def _mesh(shard: bool):
+    if not shard:
+        return None
+    import jax
+    from jax.sharding import Mesh
+
+    return Mesh(np.array(jax.devices()), ("runs",))
+
+
+def _full(problem, point: dict) -> dict:
+    """A point's values broadcast to their parameters' shapes (so that points naming a
+    vector parameter by one value or by all its components stack)."""
+    specs = problem.parameters()
+    return {
+        k: np.broadcast_to(np.asarray(v, float), specs[k].value.shape) for k, v in point.items()
+    }
+
+
+def _held_out(problem, points: dict, seeds: int, chunk: int, mesh, first: int = 0):
+    """The headline metric of each named parameter point on the held-out noise seeds
+    `first + seeds, ..., first + 2 seeds - 1` (never seen by the sweep or the tuning):
+    `{name: {"params", "metric", "failed"}}` (`metric` the mean over the successful
+    seeds)."""
+    import jax.numpy as jnp
+
+    from . import studies
+
+    names = list(points)
+    full = [_full(problem, points[n]) for n in names]
+    params = {k: np.stack([f[k] for f in full]) for k in full[0]}
+    table = studies.sweep(
+        problem, params, jnp.arange(first + seeds, first + 2 * seeds), chunk=chunk, mesh=mesh
+    )
+    out = {}
+    for i, n in enumerate(names):
+        rows = table[table["point"] == i]
+        ok = rows["result"] == "successful"
+        out[n] = {
+            "params": {k: _py(v) for k, v in points[n].items()},
+            "metric": float(rows[ok][problem.metric].mean()) if ok.any() else float("nan"),
+            "failed": int((~ok).sum()),
+        }
+    return out
+
+
+def _py(x):
+    x = np.asarray(x, float)
+    return float(x) if x.ndim == 0 else x.tolist()
+
+
+def _grid(problem, grid):
+    from . import studies
+
+    spec = grid or getattr(problem, "grid", "")
+    if not spec:
+        raise ValueError(f"{problem.title} has no default grid: give --grid")
+    return spec, studies.parse_grid(spec)
+
+
+def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0):
+    import jax.numpy as jnp
+
+    from . import studies
+
+    spec, params = _grid(problem, grid)
+    table = studies.sweep(
+        problem,
+        params,
+        jnp.arange(first, first + seeds),
+        chunk=chunk,
+        mesh=mesh,
+        progress=not quiet,
+    )
+    return (
+        spec,
+        table,
+        studies.summarise(table, problem.metric),
+        studies.best(table, problem.metric),
+    )
+
+
+def _defaults_of(problem, names) -> dict:
+    """The defaults (the paper's values) of the grid's parameters."""
+    return {k: problem.parameters()[k].value for k in names}
+
+
+def _print_result(tag, problem, held, extra=""):
+    head = f"[{tag}] " if tag else ""
+    for name, r in held.items():
+        values = ", ".join(f"{k} = {np.round(v, 4).tolist()}" for k, v in r["params"].items())
+        failed = f" ({r['failed']} held-out run(s) failed)" if r["failed"] else ""
+        print(
+            f"{head}{name:<11} {values:<40} held-out {problem.metric} = {r['metric']:.4g}{failed}"
+        )
+    if extra:
+        print(f"{head}{extra}")
+
+
+def sweep_command(
+    problem: str,
+    grid: str | None = None,
+    noise: float = 0.1,
+    seeds: int = 8,
+    data=None,
+    duration: float | None = None,
+    rate: float | None = None,
+    variants=None,
+    chunk: int = 64,
+    shard: bool = False,
+    out=None,
+    quiet: bool = False,
+    seed: int = 0,
+    formats=("png",),
+) -> dict:
+    """`visjax sweep PROBLEM`: a grid of the problem's parameters (`--grid`, default the
+    problem's) over `seeds` noise seeds from `seed` (`studies.sweep`), the best point by
+    the mean metric, and the best point and the defaults (the paper's values) re-measured
+    on `seeds` held-out seeds. Writes `runs.parquet`, `runs.csv`, `sweep.<format>` and
+    `summary.json` (kind `sweep`: `{"metric", "best": {"params", "metric"}, "paper":
+    {"params", "metric"}, ...}`, the metrics held-out)."""
+    started = time.perf_counter()
+    settings = _settings(locals())
+    _enable_x64()
+    from . import studies
+    from .plots import plot_sweep
+
+    results, mesh = {}, _mesh(shard)
+    for tag, p in problems(problem, data, noise, duration, rate, variants):
+        if not p.scored:
+            raise ValueError(f"{p.title}: a sweep needs the truth (the data file has none)")
+        spec, table, summary, best = _one_sweep(p, grid, seeds, chunk, mesh, quiet, seed)
+        paper = _defaults_of(p, best["params"])
+        held = _held_out(p, {"best": best["params"], "paper": paper}, seeds, chunk, mesh, seed)
+        result = {
+            "metric": p.metric,
+            "best": {"params": held["best"]["params"], "metric": held["best"]["metric"]},
+            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
+            "problem": p.title,
+            "grid": spec,
+            "noise_px": noise,
+            "seeds": seeds,
+            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
+            "best_training_metric": best["metric"],
+            "best_gains": p.gains(best["params"]),
+            "paper_gains": p.gains({}),
+            "failed_runs": int((table["result"] != "successful").sum()),
+            "runs": len(table),
+            "problem_settings": p.settings(),
+            **p.checks(best["params"]),
+        }
+        _print_result(tag, p, held, f"{result['failed_runs']} of {len(table)} sweep runs failed")
+        folder = _folder(out, tag)
+        if folder is not None:
+            studies.save_table(table, folder)
+            plot_sweep(
+                summary,
+                p.metric,
+                list(best["params"]),
+                best=held["best"],
+                paper=held["paper"],
+                label=p.label,
+                title=p.title,
+                path=folder / "sweep.png",
+                units={k: v.units for k, v in p.parameters().items()},
+                formats=formats,
+            )
+        results[tag] = _summary(
+            "sweep", result, settings=settings, seed=seed, started=started, out=folder
+        )
+    return _result(results, settings, seed, started, out)
+
+
+def tune_command(
+    problem: str,
+    grid: str | None = None,
+    noise: float = 0.1,
+    seeds: int = 4,
+    steps: int = 30,
+    learning_rate: float = 0.1,
+    data=None,
+    duration: float | None = None,
+    rate: float | None = None,
+    variants=None,
+    chunk: int = 64,
+    shard: bool = False,
+    out=None,
+    quiet: bool = False,
+    seed: int = 0,
+    formats=("png",),
+) -> dict:
+    """`visjax tune PROBLEM`: a sweep of the grid (`--grid`, default the problem's) on
+    `seeds` training seeds, then `studies.tune` (Adam on the log parameters, forward-mode
+    gradients through the runner, `steps` steps) from the sweep's best point on the same
+    seeds; the tuned point, the sweep's best and the defaults (the paper's values)
+    re-measured on `seeds` held-out seeds. Writes `runs.parquet`, `runs.csv` (the sweep),
+    `history.csv`, `sweep.png`, `tune.png` and `summary.json` (kind `tune`)."""
+    started = time.perf_counter()
+    settings = _settings(locals())
+    _enable_x64()
+    import jax.numpy as jnp
+    import optax
+    import pandas as pd
+
+    from . import studies
+    from .plots import plot_sweep, plot_tune_history
+
+    results, mesh = {}, _mesh(shard)
+    for tag, p in problems(problem, data, noise, duration, rate, variants):
+        if not p.scored:
+            raise ValueError(f"{p.title}: tuning needs the truth (the data file has none)")
+        spec, table, summary, best = _one_sweep(p, grid, seeds, chunk, mesh, quiet, seed)
+        tuned = studies.tune(
+            p,
+            best["params"],
+            jnp.arange(seed, seed + seeds),
+            optimiser=optax.adam(learning_rate),
+            steps=steps,
+            progress=not quiet,
+        )
+        paper = _defaults_of(p, best["params"])
+        held = _held_out(
+            p,
+            {"tuned": tuned.params, "sweep best": best["params"], "paper": paper},
+            seeds,
+            chunk,
+            mesh,
+            seed,
+        )
+        result = {
+            "metric": p.metric,
+            "best": {"params": held["tuned"]["params"], "metric": held["tuned"]["metric"]},
+            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
+            "sweep_best": {
+                "params": held["sweep best"]["params"],
+                "metric": held["sweep best"]["metric"],
+            },
+            "improvement_over_paper": held["paper"]["metric"] / held["tuned"]["metric"],
+            "problem": p.title,
+            "grid": spec,
+            "noise_px": noise,
+            "seeds": seeds,
+            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
+            "steps": steps,
+            "optimiser": f"optax.adam({learning_rate}) on the log parameters, forward mode",
+            "training_loss": {"sweep_best": tuned.loss0, "tuned": tuned.loss},
+            "tuned_gains": p.gains(tuned.params),
+            "paper_gains": p.gains({}),
+            "held_out_failed_runs": {k: v["failed"] for k, v in held.items()},
+            "problem_settings": p.settings(),
+            **p.checks(tuned.params),
+        }
+        extra = f"held-out improvement over the defaults: x {result['improvement_over_paper']:.3g}"
+        for line in p.check_lines(result):
+            extra += f"; {line}"
+        _print_result(tag, p, held, extra)
+        folder = _folder(out, tag)
+        if folder is not None:
+            studies.save_table(table, folder)
+            pd.DataFrame(tuned.history).to_csv(folder / "history.csv", index=False)
+            plot_sweep(
+                summary,
+                p.metric,
+                list(best["params"]),
+                best=held["tuned"],
+                paper=held["paper"],
+                label=p.label,
+                title=p.title,
+                path=folder / "sweep.png",
+                units={k: v.units for k, v in p.parameters().items()},
+                formats=formats,
+            )
+            plot_tune_history(
+                tuned.history,
+                label=f"training {p.label}",
+                title=p.title,
+                path=folder / "tune.png",
+                formats=formats,
+            )
+        results[tag] = _summary(
+            "tune", result, settings=settings, seed=seed, started=started, out=folder
+        )
+    return _result(results, settings, seed, started, out)
