@@ -7,6 +7,7 @@ import pytest
 import visjax
 from visjax.cli import build_parser, main
 from visjax.io import read_summary
+from visjax.papers.chitrakaran import K_EQ63
 
 
 def _summary(folder) -> dict:
@@ -313,7 +314,7 @@ def test_compare_command_writes_records_that_load(tmp_path, capsys):
     assert set(table["method"]) == {"estimator", "batch", "batch_window", "ekf"}
     assert (table["result"] == "successful").all()
     assert (table["latency_s_per_sample"] > 0).all()
-    rms = np.array(table["rms_last_half"].tolist())
+    rms = np.array(table["rms"].tolist())
     assert rms.shape == (8, 3) and np.all(np.isfinite(rms))
     # every method sees the same noisy frames, and they differ between seeds
     batch = table[table.method == "batch"]
@@ -324,7 +325,7 @@ def test_compare_command_writes_records_that_load(tmp_path, capsys):
     with pytest.raises(SystemExit) as bad:
         main(["compare", "velocity", "--data", "x.npz", "--duration", "2"])
     assert bad.value.code == 2
-    assert "--duration applies to the paper's scenario" in capsys.readouterr().err
+    assert "--duration and --rate apply to the problem's scene" in capsys.readouterr().err
 
 
 @pytest.mark.slow
@@ -334,21 +335,23 @@ def test_sweep_then_tune_commands(tmp_path, capsys):
     tuned gains ten times better than eq. (63)'s on held-out seeds."""
     import pandas as pd
 
-    common = ["velocity", "--grid", "K=0.01/10,rho=0.1/1", "--duration", "2", "--seeds", "2"]
+    grid = "K_scale=0.01/10,rho_scale=0.1/1"  # multipliers of eq. (63)'s gains
+    common = ["velocity", "--grid", grid, "--duration", "2", "--seeds", "2"]
     sweep_out, tune_out = tmp_path / "sweep", tmp_path / "tune"
     assert main(["sweep", *common, "--quiet", "--out", str(sweep_out)]) == 0
     table = pd.read_parquet(sweep_out / "runs.parquet")
     assert len(table) == 8 and set(table["seed"]) == {0, 1}
     pd.testing.assert_frame_equal(pd.read_csv(sweep_out / "runs.csv"), table, check_dtype=False)
     # K x 10 breaks Euler's stability bound at 1 kHz: flagged rows without numbers
-    bad = table[table["K"] == 10.0]
+    bad = table[table["K_scale"] == 10.0]
     assert set(bad["result"]) == {"unstable_step"} and bad["rms_worst"].isna().all()
     # strict JSON (no NaN): loads with any parser
     summary = json.loads((sweep_out / "summary.json").read_text(), parse_constant=pytest.fail)
     assert read_summary(sweep_out / "summary.json")["kind"] == "sweep"
     assert summary["metric"] == "rms_worst"
-    assert summary["best"]["params"] == {"K": 0.01, "rho": 0.1}
-    assert summary["paper"]["params"] == {"K": 1.0, "rho": 1.0}
+    assert summary["best"]["params"] == {"K_scale": 0.01, "rho_scale": 0.1}
+    assert summary["paper"]["params"] == {"K_scale": 1.0, "rho_scale": 1.0}
+    np.testing.assert_allclose(summary["best_gains"]["K"], 0.01 * np.array(K_EQ63), rtol=1e-12)
     # held-out seeds 2 and 3: the paper's gains at 0.1 px are an order of magnitude worse
     assert summary["held_out_seeds"] == [2, 3]
     assert summary["paper"]["metric"] > 10 * summary["best"]["metric"] > 0

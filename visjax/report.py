@@ -95,50 +95,18 @@ def geometry_report(
     started = time.perf_counter()
     settings = dict(scenes=scenes, points=points, noise=noise, seed=seed, formats=list(formats))
     _enable_x64()
-    import jax
-
-    from .baselines import opencv_reconstruction
-    from .geometry import euclidean_reconstruction
-    from .papers.chitrakaran import reconstruction_errors
+    from .papers.chitrakaran import geometry_study
     from .plots import plot_geometry
-    from .sim import random_planar_scenes
 
-    stages = _progress(3, "geometry", quiet)
-    stages.set_postfix_str("visjax, batched")
-    sc = random_planar_scenes(scenes, points, seed=seed, noise_px=noise)
-    rng = np.random.default_rng(seed + 1)
-    # A rough prior of the plane normal (about 1 degree off) picks between the two physical
-    # decompositions; both pipelines get the same one.
-    prior = sc.n_star + 0.02 * rng.normal(size=sc.n_star.shape)
-
-    recon = jax.jit(jax.vmap(euclidean_reconstruction))
-    t0 = time.perf_counter()
-    jax.block_until_ready(recon(sc.p_ref, sc.p_cur, sc.A, prior))
-    t_compile = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    rec = jax.block_until_ready(recon(sc.p_ref, sc.p_cur, sc.A, prior))
-    t_visjax = time.perf_counter() - t0
-    ours = {k: np.asarray(getattr(rec, k)) for k in ("R_bar", "x_h", "n_star", "alpha", "H")}
+    stages = _progress(2, "geometry", quiet)
+    stages.set_postfix_str("visjax (batched) and OpenCV (per scene)")
+    sc, ours, errors, seconds = geometry_study(scenes, points, noise, seed)
     stages.update()
-    stages.set_postfix_str("OpenCV, per scene")
-
-    t0 = time.perf_counter()
-    cv = [
-        opencv_reconstruction(sc.p_ref[i], sc.p_cur[i], sc.A[i], prior[i]) for i in range(len(sc))
-    ]
-    t_cv = time.perf_counter() - t0
-    theirs = {k: np.stack([c[k] for c in cv]) for k in cv[0]}
-    stages.update()
-
-    errors = {
-        "visjax": reconstruction_errors(ours, sc),
-        "opencv": reconstruction_errors(theirs, sc),
-    }
     body = {
         "scenes": scenes,
         "points": points,
         "noise_px": noise,
-        "seconds": {"visjax_compile": t_compile, "visjax": t_visjax, "opencv": t_cv},
+        "seconds": seconds,
         "errors": {
             who: {
                 k: {"median": float(np.median(v)), "max": float(np.max(v))} for k, v in errs.items()
@@ -305,135 +273,75 @@ def velocity_report(
     return summary
 
 
-def _last_half_rms(t, estimate, truth):
-    t = np.asarray(t)
-    half = t >= t[0] + 0.5 * (t[-1] - t[0])
-    err = np.asarray(estimate)[half] - np.asarray(truth)[half]
-    return [float(x) for x in np.sqrt(np.nanmean(err**2, axis=0))], [
-        float(t[half][0]),
-        float(t[-1]),
-    ]
-
-
 def velocity_data_report(
     path, out=None, quiet: bool = False, filter_hz=None, formats=("png",)
 ) -> dict:
     """The velocity estimator of Chitrakaran et al. on a user's data file
-    (`visjax.io.VelocityData`): $n^*$ from the frames, $z_1^*$ from the known length, the
-    estimate in the camera and object frames (`estimate.npz`), `summary.json` (kind
-    `velocity_data`) with `z1_star` and, when the file has the true `velocity`,
-    `rms_last_half` (6 floats over the second half of the run), and `velocity.<format>`."""
+    (`visjax.io.VelocityData`, run by `papers.velocity_from_file`): $n^*$ from the frames,
+    $z_1^*$ from the known length, the estimate in the camera and object frames
+    (`estimate.npz`), `summary.json` (kind `velocity_data`) with `z1_star` and, when the
+    file has the true `velocity`, `rms_last_half` (6 floats over the second half of the
+    run), and `velocity.<format>`."""
     started = time.perf_counter()
     settings = dict(data=str(path), filter_hz=filter_hz, formats=list(formats))
     _enable_x64()
-    import jax.numpy as jnp
-
-    from ._results import RESULTS, result_names
-    from .estimators import (
-        SaveAt,
-        VelocityEstimator,
-        fixed_camera_stream,
-        integration_step,
-        lowpass,
-        lowpass_delay,
-        run,
-    )
-    from .io import VelocityData
-    from .papers.chitrakaran import DOF_NAMES, K_EQ63, RHO_EQ63
+    from .papers import velocity_from_file
+    from .papers.chitrakaran import DOF_NAMES
     from .plots import plot_velocity
 
-    data = VelocityData.load(path)
-    stages = _progress(3, "velocity", quiet)
-    stages.set_postfix_str("reconstruct every frame")
-    stream, n_star, z1_star = fixed_camera_stream(
-        data.t,
-        data.pixels,
-        data.A,
-        data.R_star,
-        data.s1,
-        known_length=data.length,
-        reference_pixels=data.reference_pixels,
-        dropouts=True,
-    )
+    stages = _progress(2, "velocity", quiet)
+    stages.set_postfix_str("reconstruct every frame, estimate")
+    run = velocity_from_file(path, filter_hz)
     stages.update()
-    stages.set_postfix_str("estimate")
-    K = K_EQ63 if data.K is None else data.K
-    rho = RHO_EQ63 if data.rho is None else data.rho
-    est = VelocityEstimator(K=K, rho=rho)
-    dt = integration_step(stream, est)  # the file's own rate where the gains allow it
-    sol = run(est, stream, dt=dt, saveat=SaveAt(), throw=False)
-    stages.update()
-    ok = sol.result == RESULTS.successful
-    ts = np.asarray(sol.ts)
-    v_hat = np.asarray(sol.outputs.v_hat)
-    body = {
-        "z1_star": float(z1_star),
-        "n_star": [float(x) for x in n_star],
-        "result": "successful" if ok else result_names(sol.result),
-        "order": list(DOF_NAMES),
-        "samples": int(len(data.t)),
-        "dropped_frames": int(np.sum(~np.asarray(stream.present))),
-        "integration_step_s": dt,
-        "K": [float(x) for x in np.asarray(K)],
-        "rho": [float(x) for x in np.asarray(rho)],
-    }
-    estimates = {"t": ts, "v_hat": v_hat, "v_object": np.asarray(sol.outputs.v_object)}
-    if filter_hz is not None:
-        estimates["v_filtered"] = np.asarray(
-            lowpass(jnp.asarray(ts), jnp.asarray(v_hat), filter_hz)
-        )
-        body["filter_hz"] = filter_hz
-        body["filter_delay_s"] = lowpass_delay(filter_hz)
-    truth = None
-    if data.velocity is not None:
-        # the truth at the integration grid: the sample held at each grid time
-        k = np.searchsorted(np.asarray(data.t), ts + 1e-9, side="right") - 1
-        truth = np.asarray(data.velocity)[k]
-        shown = estimates.get("v_filtered", v_hat)
-        body["rms_last_half"], body["window_s"] = _last_half_rms(ts, shown, truth)
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        np.savez(out / "estimate.npz", **estimates)
-        plot_velocity(
-            ts,
-            truth,
-            estimates.get("v_filtered", v_hat),
-            title=f"velocity estimator (Chitrakaran et al.) on {Path(path).name}",
-            path=out / "velocity.png",
-            formats=formats,
-        )
+    title = f"velocity estimator (Chitrakaran et al.) on {Path(path).name}"
+    out = _write_file_run(run, out, "velocity", plot_velocity, title, formats)
     stages.update()
     stages.close()
     summary = _summary(
-        "velocity_data", body, settings=settings, seed=None, started=started, out=out
+        "velocity_data", run.body, settings=settings, seed=None, started=started, out=out
     )
     print(
         f"Velocity estimator (Chitrakaran et al., eqs. 39-40) on {path}: "
         f"{summary['samples']} frames"
     )
     print(f"recovered z1* = {summary['z1_star']:.6f} m; result: {summary['result']}")
+    _print_last_half(summary, "RMS error", DOF_NAMES)
+    return _finish_file_run(run, out, "velocity", formats, summary)
+
+
+def _write_file_run(run, out, name, plot, title, formats):
+    """`estimate.npz` and the figure of a run on a data file, into `out` (if given)."""
+    if out is None:
+        return None
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    np.savez(out / "estimate.npz", **run.arrays)
+    plot(run.t, run.truth, run.estimate, title=title, path=out / f"{name}.png", formats=formats)
+    return out
+
+
+def _print_last_half(summary, what, names):
     if "rms_last_half" in summary:
         a, b = summary["window_s"]
-        print(
-            f"RMS error {a:g}-{b:g} s: "
-            + ", ".join(f"{n} {r:.4g}" for n, r in zip(DOF_NAMES, summary["rms_last_half"]))
-        )
+        rms = summary["rms_last_half"]
+        print(f"{what} {a:g}-{b:g} s: " + ", ".join(f"{n} {r:.4g}" for n, r in zip(names, rms)))
+
+
+def _finish_file_run(run, out, name, formats, summary):
+    """The files written, then the run's failure (if any) as an error."""
     if out is not None:
         print(
             f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
-            f"{_files(out / 'velocity.png', formats)}"
+            f"{_files(out / f'{name}.png', formats)}"
         )
-    if not ok:
-        raise RuntimeError(
-            f"the estimator stopped: {sol.result} at sample {int(sol.failed_sample)}"
-        )
+    if run.failure is not None:
+        raise RuntimeError(run.failure)
     return summary
 
 
 def structure_data_report(path, out=None, quiet: bool = False, formats=("png",)) -> dict:
     """The unknown input observer of Jang's thesis (eq. (3.5)) on a user's data file
-    (`visjax.io.StructureData`).
+    (`visjax.io.StructureData`, run by `papers.moving_point_from_file`).
 
     The observer and its gains come from `visjax.papers.moving_point_observer_for_data`
     (gains designed by `design_uio_for_motion` for the file's camera motion; motion
@@ -445,77 +353,28 @@ def structure_data_report(path, out=None, quiet: bool = False, formats=("png",))
     started = time.perf_counter()
     settings = dict(data=str(path), formats=list(formats))
     _enable_x64()
-    from ._results import RESULTS, result_names
-    from .estimators import SaveAt, integration_step, moving_camera_stream, run
-    from .io import StructureData
-    from .papers import moving_point_observer_for_data
+    from .papers import moving_point_from_file
     from .plots import plot_structure
 
-    data = StructureData.load(path)
-    t = np.asarray(data.t, float)
-    stages = _progress(3, "structure", quiet)
-    stages.set_postfix_str("design the gains (LMI)")
-    observer, u, info = moving_point_observer_for_data(data)
-    rate = info["design"]["convergence_rate_per_s"]
+    stages = _progress(2, "structure", quiet)
+    stages.set_postfix_str("design the gains (LMI), estimate")
+    run = moving_point_from_file(path)
     stages.update()
-    stages.set_postfix_str("estimate")
-    stream = moving_camera_stream(t, data.pixels, u, data.A, dropped="extrapolate")
-    dt = integration_step(stream, observer, max_step=1e-3)  # the thesis' 1 kHz law
-    sol = run(observer, stream, dt=dt, saveat=SaveAt(), throw=False)
-    stages.update()
-    ok = bool(sol.result == RESULTS.successful)
-    # the estimate at each frame time: the grid point at (or just after) it
-    grid = np.asarray(sol.ts)
-    j = np.clip(np.searchsorted(grid, t - 1e-9), 0, len(grid) - 1)
-    position = np.asarray(sol.outputs.position)[j]
-    x_hat = np.asarray(sol.outputs.x_hat)[j]
-    seen = np.all(np.isfinite(np.asarray(data.pixels)), axis=1)
-    body = {
-        "result": "successful" if ok else result_names(sol.result),
-        "frames": int(len(t)),
-        "dropped_frames": int(np.sum(~seen)),
-        "integration_step_s": dt,
-        **info,
-    }
-    truth = None
-    if data.position is not None:
-        truth = np.asarray(data.position)
-        body["rms_last_half"], body["window_s"] = _last_half_rms(t, position, truth)
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        np.savez(out / "estimate.npz", t=t, position=position, x_hat=x_hat)
-        plot_structure(
-            t,
-            truth,
-            position,
-            title=f"unknown input observer (Jang's thesis) on {Path(path).name}",
-            path=out / "structure.png",
-            formats=formats,
-        )
+    title = f"unknown input observer (Jang's thesis) on {Path(path).name}"
+    out = _write_file_run(run, out, "structure", plot_structure, title, formats)
     stages.update()
     stages.close()
     summary = _summary(
-        "structure_data", body, settings=settings, seed=None, started=started, out=out
+        "structure_data", run.body, settings=settings, seed=None, started=started, out=out
     )
+    rate = summary["design"]["convergence_rate_per_s"]
     print(
-        f"Unknown input observer (Jang's thesis, eq. 3.5) on {path}: {len(t)} frames, "
-        f"gains by design_uio_for_motion (rate {rate:.3g}/s); result: {summary['result']}"
+        f"Unknown input observer (Jang's thesis, eq. 3.5) on {path}: {summary['frames']} "
+        f"frames, gains by design_uio_for_motion (rate {rate:.3g}/s); result: "
+        f"{summary['result']}"
     )
-    if "rms_last_half" in summary:
-        a, b = summary["window_s"]
-        print(
-            f"RMS position error {a:g}-{b:g} s (m): "
-            + ", ".join(f"{n} {r:.4g}" for n, r in zip("XYZ", summary["rms_last_half"]))
-        )
-    if out is not None:
-        print(
-            f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
-            f"{_files(out / 'structure.png', formats)}"
-        )
-    if not ok:
-        raise RuntimeError(f"the observer stopped: {sol.result} at sample {int(sol.failed_sample)}")
-    return summary
+    _print_last_half(summary, "RMS position error (m)", "XYZ")
+    return _finish_file_run(run, out, "structure", formats, summary)
 
 
 def _thesis_set_names(sets) -> list:
@@ -654,80 +513,36 @@ def structure_report(
 
 def euclidean_data_report(path, out=None, quiet: bool = False, formats=("png",)) -> dict:
     """The adaptive structure estimator of Nath et al. on a user's data file
-    (`visjax.io.EuclideanData`): built from the nominal camera of the file
-    (`AdaptiveStructureEstimator.from_nominal`: initial guesses and gains from the scene's
-    scale, never from a truth), run at 1 kHz on the held samples (at the samples if they
-    are faster), features out of view (NaN) masked in both laws. Writes `estimate.npz`
-    (`t`, `features` (M, n - k, 3), the recovered camera `A`, `R_c`, `x_c` over time),
-    `summary.json` (kind `euclidean_data`: the final features and camera; with the truth,
-    `final_position_error_m`, n - k floats) and `euclidean.<format>`."""
+    (`visjax.io.EuclideanData`, run by `papers.static_points_from_file`): built from the
+    nominal camera of the file (`AdaptiveStructureEstimator.from_nominal`: initial guesses
+    and gains from the scene's scale, never from a truth), run at 1 kHz on the held
+    samples (at the samples if they are faster), features out of view (NaN) masked in both
+    laws. Writes `estimate.npz` (`t`, `features` (M, n - k, 3), the recovered camera `A`,
+    `R_c`, `x_c` over time), `summary.json` (kind `euclidean_data`: the final features and
+    camera; with the truth, `final_position_error_m`, n - k floats) and
+    `euclidean.<format>`."""
     started = time.perf_counter()
     settings = dict(data=str(path), formats=list(formats))
     _enable_x64()
-    from ._results import RESULTS, result_names
-    from .estimators import (
-        AdaptiveStructureEstimator,
-        SaveAt,
-        integration_step,
-        platform_stream,
-        run,
-    )
-    from .io import EuclideanData
+    from .papers import static_points_from_file
     from .plots import plot_feature_estimates
 
-    data = EuclideanData.load(path)
-    k = data.n_known
-    pixels = np.asarray(data.pixels, float)
     stages = _progress(2, "euclidean", quiet)
     stages.set_postfix_str("estimate (compiles once)")
-    stream = platform_stream(
-        data.t, data.platform_R, data.platform_x, pixels[:, k:], pixels[:, :k], data.known_features
-    )
-    longest = float(np.max(np.diff(np.asarray(data.t, float))))
-    # the gains of `from_nominal` are derived for the step, so no bound applies here
-    dt = integration_step(stream, max_step=1e-3)
-    est = AdaptiveStructureEstimator.from_nominal(
-        stream, data.A_nominal, data.R_c_nominal, data.x_c_nominal, dt=dt
-    )
-    step = longest if dt is None else dt
-    every = max(1, int(round(0.01 / step)))
-    sol = run(est, stream, dt=dt, saveat=SaveAt(every=every), throw=False)
+    run = static_points_from_file(path)
     stages.update()
-    ok = bool(sol.result == RESULTS.successful)
-    features = np.asarray(sol.outputs.omega_s)
-    A, R_c, x_c = (np.asarray(getattr(sol.outputs, f)) for f in ("A", "R_c", "x_c"))
-    body = {
-        "result": "successful" if ok else result_names(sol.result),
-        "frames": int(pixels.shape[0]),
-        "known_features": k,
-        "unknown_features": int(pixels.shape[1] - k),
-        "missing_observations": int(np.sum(~np.all(np.isfinite(pixels), axis=-1))),
-        "integration_step_s": dt,
-        "final_features_m": features[-1].tolist(),
-        "camera": {"A": A[-1].tolist(), "R_c": R_c[-1].tolist(), "x_c": x_c[-1].tolist()},
-    }
-    if data.features is not None:
-        err = np.linalg.norm(features[-1] - np.asarray(data.features), axis=-1)
-        body["final_position_error_m"] = [float(e) for e in err]
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        np.savez(
-            out / "estimate.npz", t=np.asarray(sol.ts), features=features, A=A, R_c=R_c, x_c=x_c
-        )
-        plot_feature_estimates(
-            sol.ts,
-            features,
-            data.features,
-            title=f"adaptive structure estimator (Nath et al.) on {Path(path).name}",
-            path=out / "euclidean.png",
-            formats=formats,
-        )
+    title = f"adaptive structure estimator (Nath et al.) on {Path(path).name}"
+
+    def plot(t, truth, features, **kwargs):  # its order: the estimate, then the truth
+        return plot_feature_estimates(t, features, truth, **kwargs)
+
+    out = _write_file_run(run, out, "euclidean", plot, title, formats)
     stages.update()
     stages.close()
     summary = _summary(
-        "euclidean_data", body, settings=settings, seed=None, started=started, out=out
+        "euclidean_data", run.body, settings=settings, seed=None, started=started, out=out
     )
+    k = summary["known_features"]
     print(
         f"Adaptive LS structure estimator (Nath et al., eqs. 37-51) on {path}: "
         f"{summary['frames']} frames, {k} known and {summary['unknown_features']} unknown "
@@ -735,16 +550,7 @@ def euclidean_data_report(path, out=None, quiet: bool = False, formats=("png",))
     )
     for i, e in enumerate(summary.get("final_position_error_m", [])):
         print(f"feature {k + i + 1}: final position error {e * 1000:8.3f} mm")
-    if out is not None:
-        print(
-            f"wrote {out / 'summary.json'}, {out / 'estimate.npz'}, "
-            f"{_files(out / 'euclidean.png', formats)}"
-        )
-    if not ok:
-        raise RuntimeError(
-            f"the estimator stopped: {sol.result} at sample {int(sol.failed_sample)}"
-        )
-    return summary
+    return _finish_file_run(run, out, "euclidean", formats, summary)
 
 
 def euclidean_report(
@@ -918,43 +724,16 @@ reading's length per second), fixed before any run."""
 def _testbed_video(path, run, Kc_true, fps):
     """The rendered frames with the tracked point (green circle) and the estimate projected
     through the true camera (red cross) drawn on them, as an MP4."""
-    import cv2
-
-    from .frontend import write_video
+    from .frontend import annotate_frames, write_video
 
     K = np.asarray(Kc_true, float)
-    est = run.estimate[np.minimum(run.frame_index, run.estimate.shape[0] - 1)]
-    out = np.empty(run.frames.shape + (3,), np.uint8)
-    for i, frame in enumerate(run.frames):
-        img = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
-        p = run.pixels[i]
-        if np.all(np.isfinite(p)):
-            cv2.circle(img, (int(round(p[0])), int(round(p[1]))), 6, (0, 200, 0), 1, cv2.LINE_AA)
-        e = est[i]
-        if np.all(np.isfinite(e)) and e[2] > 0:
-            q = K[:2, :2] @ (e[:2] / e[2]) + K[:2, 2]
-            if np.all(np.abs(q) < 1e4):
-                cv2.drawMarker(
-                    img,
-                    (int(round(q[0])), int(round(q[1]))),
-                    (0, 0, 230),
-                    cv2.MARKER_CROSS,
-                    12,
-                    1,
-                    cv2.LINE_AA,
-                )
-        cv2.putText(
-            img,
-            f"{run.set_name}  t = {run.frame_ts[i]:5.2f} s",
-            (8, 20),
-            cv2.FONT_HERSHEY_SIMPLEX,
-            0.5,
-            (255, 255, 255),
-            1,
-            cv2.LINE_AA,
-        )
-        out[i] = img
-    write_video(path, out, fps)
+    est = np.asarray(run.estimate)[np.minimum(run.frame_index, run.estimate.shape[0] - 1)]
+    in_front = np.all(np.isfinite(est), axis=-1) & (est[:, 2] > 0)
+    z = np.where(in_front, est[:, 2], 1.0)
+    projected = (est[:, :2] / z[:, None]) @ K[:2, :2].T + K[:2, 2]
+    projected = np.where(in_front[:, None], projected, np.nan)
+    captions = [f"{run.set_name}  t = {t:5.2f} s" for t in np.asarray(run.frame_ts)]
+    write_video(path, annotate_frames(run.frames, run.pixels, projected, captions), fps)
 
 
 def _testbed_record(run, thesis_rms) -> dict:

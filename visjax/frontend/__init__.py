@@ -17,4 +17,8 @@ from ._tracking import (
     track_frames as track_frames,
     track_marker as track_marker,
 )
-from ._video import read_video as read_video, write_video as write_video
+from ._video import (
+    annotate_frames as annotate_frames,
+    read_video as read_video,
+    write_video as write_video,
+)

@@ -105,3 +105,31 @@ def read_video(path) -> tuple[np.ndarray, float]:
     if not frames:
         raise ValueError(f"{path}: no frame could be decoded.")
     return np.stack(frames).astype(np.uint8), fps if np.isfinite(fps) and fps > 0 else np.nan
+
+
+def annotate_frames(frames, tracked=None, projected=None, captions=None) -> np.ndarray:
+    """Grey frames as BGR colour frames with overlays, for a video of a tracking run:
+    `tracked` (N, 2) pixels drawn as green circles, `projected` (N, 2) pixels (an estimate
+    projected into the image) as red crosses, `captions` (N strings) at the top left. A
+    non-finite pixel, or one more than 1e4 px away, is not drawn. OpenCV, never jit.
+
+    **Returns:** (N, H, W, 3) uint8 BGR frames (`write_video` writes them)."""
+    import cv2
+
+    frames = check_frames(frames)
+    out = np.empty(frames.shape + (3,), np.uint8)
+    for i, frame in enumerate(frames):
+        img = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+        p = None if tracked is None else np.asarray(tracked[i], float)
+        if p is not None and np.all(np.isfinite(p)):
+            cv2.circle(img, (int(round(p[0])), int(round(p[1]))), 6, (0, 200, 0), 1, cv2.LINE_AA)
+        q = None if projected is None else np.asarray(projected[i], float)
+        if q is not None and np.all(np.isfinite(q)) and np.all(np.abs(q) < 1e4):
+            centre = (int(round(q[0])), int(round(q[1])))
+            cv2.drawMarker(img, centre, (0, 0, 230), cv2.MARKER_CROSS, 12, 1, cv2.LINE_AA)
+        if captions is not None:
+            white = (255, 255, 255)
+            font = cv2.FONT_HERSHEY_SIMPLEX
+            cv2.putText(img, str(captions[i]), (8, 20), font, 0.5, white, 1, cv2.LINE_AA)
+        out[i] = img
+    return out

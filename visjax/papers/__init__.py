@@ -15,6 +15,12 @@ Nothing outside knows a paper's numbers.
 
 from .. import studies as _studies
 from . import chitrakaran as chitrakaran, jang as jang, nath as nath
+from ._files import (
+    FileEstimate as FileEstimate,
+    moving_point_from_file as moving_point_from_file,
+    static_points_from_file as static_points_from_file,
+    velocity_from_file as velocity_from_file,
+)
 from ._moving_point import (
     MovingPointProblem as MovingPointProblem,
     moving_point_observer_for_data as moving_point_observer_for_data,
