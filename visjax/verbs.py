@@ -104,6 +104,7 @@ def run_command(
     started = time.perf_counter()
     settings = _settings(locals())
     _enable_x64()
+    import equinox as eqx
     import jax
 
     from ._results import result_names
@@ -114,7 +115,8 @@ def run_command(
         m = p.check_method(method)
         params = p.resolve()
         inputs = p.inputs(jax.random.key(seed))
-        sol = jax.block_until_ready(eqx_jit(lambda x: p.solve(m, params, x, outputs=True))(inputs))
+        solve = eqx.filter_jit(lambda x, p=p, m=m: p.solve(m, params, x, outputs=True))
+        sol = jax.block_until_ready(solve(inputs))
         code = result_names(sol.result)
         values = jax.tree_util.tree_map(np.asarray, p.metrics(m, sol))
         ok = code == "successful" and all(np.all(np.isfinite(v)) for v in values.values())
@@ -144,12 +146,6 @@ def run_command(
             "run", body, settings=settings, seed=seed, started=started, out=folder
         )
     return _result(results, settings, seed, started, out)
-
-
-def eqx_jit(fn):
-    import equinox as eqx
-
-    return eqx.filter_jit(fn)
 
 
 def _trajectory(sol) -> dict:
