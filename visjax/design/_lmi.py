@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..estimators import THESIS_A_U, rank_condition
+from ..estimators import THESIS_A_U, rank_condition, uio_matrices
 
 _MARGIN = 1e-6
 
@@ -402,6 +402,16 @@ def design_uio(
     return _checked(A, C, D, P, K, Y, lipschitz, uub, alpha, A_u_arr, K_u, u_list, persistent)
 
 
+def _uio_numpy(A, C, D, K, Y):
+    """$E, M, N, L$ of eq. (3.5) as float64 NumPy arrays: `estimators.uio_matrices`, the
+    one derivation, evaluated in float64 whatever the process's JAX precision (a scoped
+    `jax.enable_x64`, restored on exit)."""
+    import jax
+
+    with jax.enable_x64(True):
+        return tuple(np.asarray(m, float) for m in uio_matrices(A, C, D, K, Y))
+
+
 def _checked(
     A,
     C,
@@ -420,12 +430,7 @@ def _checked(
     """Re-check a design in NumPy: M D = 0; for a fixed design N Hurwitz with real parts
     <= -alpha and Q of (3.6) (+ 2 alpha P) negative definite; for a velocity range the
     vertex inequalities."""
-    CD = C @ D
-    CD_pinv = np.linalg.pinv(CD)
-    E = -D @ CD_pinv + Y @ (np.eye(2) - CD @ CD_pinv)
-    M = np.eye(3) + E @ C
-    N = M @ A - K @ C
-    L = K @ (np.eye(2) + C @ E) - M @ A @ E
+    E, M, N, L = _uio_numpy(A, C, D, K, Y)
     strict = 3.0 if uub else 2.0
     problems = []
     if np.linalg.norm(M @ D) > 1e-8:
@@ -609,11 +614,7 @@ def certified_lipschitz(A, C, D, K, Y, *, uub: bool = False) -> float:
 
     A, C, D = _as_arrays(A, C, D)
     K, Y = np.asarray(K, float), np.asarray(Y, float)
-    CD = C @ D
-    CD_pinv = np.linalg.pinv(CD)
-    E = -D @ CD_pinv + Y @ (np.eye(2) - CD @ CD_pinv)  # eq. (3.5)
-    M = np.eye(3) + E @ C
-    N = M @ A - K @ C
+    _, M, N, _ = _uio_numpy(A, C, D, K, Y)  # eq. (3.5)
     P = cp.Variable((3, 3), symmetric=True)
     beta = cp.Variable(nonneg=True)
     X = N.T @ P + P @ N + (3.0 if uub else 2.0) * np.eye(3)
