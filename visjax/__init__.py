@@ -30,9 +30,8 @@ from . import (
     studies as studies,
 )
 from ._results import RESULTS as RESULTS, result_names as result_names
+from ._version import __version__ as __version__
 from ._xla_workaround import (
     apply_xla_cpu_workarounds as apply_xla_cpu_workarounds,
     xla_cpu_options as xla_cpu_options,
 )
-
-__version__ = "0.3.0"

@@ -91,3 +91,9 @@ def chunked_map(f, xs, batch_size: int):
         return jnp.concatenate([flat, y[-1, b - (n - head) :]])
 
     return jax.tree_util.tree_map(assemble, ys)
+
+
+def command_x64() -> None:
+    """The commands (`visjax.report`, `visjax.verbs`) run in float64; the library itself
+    never flips the flag."""
+    jax.config.update("jax_enable_x64", True)

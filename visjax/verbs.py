@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .report import _enable_x64, _files, _summary
+from ._util import command_x64
+from .io import command_summary, figure_files
 
 
 def _settings(arguments: dict) -> dict:
@@ -76,7 +77,7 @@ def _result(results: dict, settings, seed, started, out):
     if list(results) == [None]:
         summary = results[None]
     else:
-        summary = _summary(
+        summary = command_summary(
             "sets", {"sets": results}, settings=settings, seed=seed, started=started, out=out
         )
     if out is not None:
@@ -103,7 +104,7 @@ def run_command(
     over time, one column per component) and `run.<format>` (the problem's figure)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    _enable_x64()
+    command_x64()
     import equinox as eqx
     import jax
 
@@ -142,7 +143,7 @@ def run_command(
             folder.mkdir(parents=True, exist_ok=True)
             pd.DataFrame(_trajectory(sol)).to_parquet(folder / "estimates.parquet", index=False)
             save_figure(p.figure(m, sol), folder / "run.png", formats)
-        results[tag] = _summary(
+        results[tag] = command_summary(
             "run", body, settings=settings, seed=seed, started=started, out=folder
         )
     return _result(results, settings, seed, started, out)
@@ -187,7 +188,7 @@ def compare_command(
     the medians per method."""
     started = time.perf_counter()
     settings = _settings(locals())
-    _enable_x64()
+    command_x64()
     import pandas as pd
 
     from . import studies
@@ -231,9 +232,9 @@ def compare_command(
             )
             print(
                 f"wrote {folder / 'summary.json'}, {folder / 'records.parquet'}, "
-                f"{folder / 'records.csv'}, {_files(folder / 'comparison.png', formats)}"
+                f"{folder / 'records.csv'}, {figure_files(folder / 'comparison.png', formats)}"
             )
-        results[tag] = _summary(
+        results[tag] = command_summary(
             "compare", body, settings=settings, seed=seed, started=started, out=folder
         )
     if list(results) == [None]:
@@ -363,7 +364,7 @@ def sweep_command(
     {"params", "metric"}, ...}`, the metrics held-out)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    _enable_x64()
+    command_x64()
     from . import studies
     from .plots import plot_sweep
 
@@ -407,7 +408,7 @@ def sweep_command(
                 units={k: v.units for k, v in p.parameters().items()},
                 formats=formats,
             )
-        results[tag] = _summary(
+        results[tag] = command_summary(
             "sweep", result, settings=settings, seed=seed, started=started, out=folder
         )
     return _result(results, settings, seed, started, out)
@@ -439,7 +440,7 @@ def tune_command(
     `history.csv`, `sweep.png`, `tune.png` and `summary.json` (kind `tune`)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    _enable_x64()
+    command_x64()
     import jax.numpy as jnp
     import optax
     import pandas as pd
@@ -519,7 +520,7 @@ def tune_command(
                 path=folder / "tune.png",
                 formats=formats,
             )
-        results[tag] = _summary(
+        results[tag] = command_summary(
             "tune", result, settings=settings, seed=seed, started=started, out=folder
         )
     return _result(results, settings, seed, started, out)

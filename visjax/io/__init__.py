@@ -2,7 +2,8 @@
 tracks), for users with their own logged data (the tables are in `visjax.io._formats`); and
 the outputs of the command line: the schema of every `summary.json`, table and array file
 (`SUMMARIES`, `TABLES`, `ARRAYS`), checked when written and loaded with `read_summary`;
-and staged (atomic) output folders (`staged_output`)."""
+staged (atomic) output folders (`staged_output`); and the writing of a command's files and
+summary (`Outputs`, `write_outputs`, `command_summary`)."""
 
 from ._formats import (
     DataFormatError as DataFormatError,
@@ -27,4 +28,10 @@ from ._staging import (
     check_output_path as check_output_path,
     staged_output as staged_output,
     user_path as user_path,
+)
+from ._writing import (
+    Outputs as Outputs,
+    command_summary as command_summary,
+    figure_files as figure_files,
+    write_outputs as write_outputs,
 )

@@ -17,8 +17,11 @@ from .. import studies as _studies
 from . import chitrakaran as chitrakaran, jang as jang, nath as nath
 from ._files import (
     FileEstimate as FileEstimate,
+    moving_point_file_reproduction as moving_point_file_reproduction,
     moving_point_from_file as moving_point_from_file,
+    static_points_file_reproduction as static_points_file_reproduction,
     static_points_from_file as static_points_from_file,
+    velocity_file_reproduction as velocity_file_reproduction,
     velocity_from_file as velocity_from_file,
 )
 from ._moving_point import (
@@ -26,6 +29,7 @@ from ._moving_point import (
     moving_point_observer_for_data as moving_point_observer_for_data,
     moving_point_problem as moving_point_problem,
 )
+from ._reproduction import Reproduction as Reproduction
 from ._static_points import (
     FinalEstimate as FinalEstimate,
     StaticPointsProblem as StaticPointsProblem,

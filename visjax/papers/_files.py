@@ -3,9 +3,14 @@
 written and nothing printed (`visjax.report` does that)."""
 
 import dataclasses
+import functools
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from ..io import Outputs
+from ._reproduction import Reproduction, stages
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,3 +201,102 @@ def static_points_from_file(path) -> FileEstimate:
     ts = np.asarray(sol.ts)
     arrays = {"t": ts, "features": features, "A": A, "R_c": R_c, "x_c": x_c}
     return FileEstimate(body, arrays, ts, features, truth, failure)
+
+
+# The data-file runs as `visjax velocity|structure|euclidean --data FILE` report them
+# (`visjax.report` writes and prints; the run's failure is raised after the files).
+
+
+def _file_reproduction(run: FileEstimate, name: str, figure, lines, write) -> Reproduction:
+    if write is not None:
+        draw = functools.partial(figure, run.t, run.truth, run.estimate)
+        write(Outputs(arrays={"estimate.npz": run.arrays}, figures={name: draw}))
+    return Reproduction(run.body, lines, failure=run.failure)
+
+
+def _last_half_lines(body, what, names) -> list[str]:
+    if "rms_last_half" not in body:
+        return []
+    a, b = body["window_s"]
+    cells = ", ".join(f"{n} {r:.4g}" for n, r in zip(names, body["rms_last_half"]))
+    return [f"{what} {a:g}-{b:g} s: {cells}"]
+
+
+def velocity_file_reproduction(path, filter_hz=None, *, quiet=True, write=None) -> Reproduction:
+    """`velocity_from_file` as `visjax velocity --data` reports it: `estimate.npz` (the
+    estimate in the camera and object frames), the figure `velocity` and the lines."""
+    from ..plots import plot_velocity
+    from .chitrakaran import DOF_NAMES
+
+    bar = stages(2, "velocity", quiet)
+    bar.set_postfix_str("reconstruct every frame, estimate")
+    run = velocity_from_file(path, filter_hz)
+    bar.update()
+    title = f"velocity estimator (Chitrakaran et al.) on {Path(path).name}"
+    body = run.body
+    lines = [
+        f"Velocity estimator (Chitrakaran et al., eqs. 39-40) on {path}: {body['samples']} frames",
+        f"recovered z1* = {body['z1_star']:.6f} m; result: {body['result']}",
+        *_last_half_lines(body, "RMS error", DOF_NAMES),
+    ]
+    rep = _file_reproduction(
+        run, "velocity", functools.partial(plot_velocity, title=title), lines, write
+    )
+    bar.update()
+    bar.close()
+    return rep
+
+
+def moving_point_file_reproduction(path, *, quiet=True, write=None) -> Reproduction:
+    """`moving_point_from_file` as `visjax structure --data` reports it: `estimate.npz`
+    (`t`, `position`, `x_hat`), the figure `structure` and the lines."""
+    from ..plots import plot_structure
+
+    bar = stages(2, "structure", quiet)
+    bar.set_postfix_str("design the gains (LMI), estimate")
+    run = moving_point_from_file(path)
+    bar.update()
+    title = f"unknown input observer (Jang's thesis) on {Path(path).name}"
+    body = run.body
+    rate = body["design"]["convergence_rate_per_s"]
+    lines = [
+        f"Unknown input observer (Jang's thesis, eq. 3.5) on {path}: {body['frames']} frames, "
+        f"gains by design_uio_for_motion (rate {rate:.3g}/s); result: {body['result']}",
+        *_last_half_lines(body, "RMS position error (m)", "XYZ"),
+    ]
+    rep = _file_reproduction(
+        run, "structure", functools.partial(plot_structure, title=title), lines, write
+    )
+    bar.update()
+    bar.close()
+    return rep
+
+
+def static_points_file_reproduction(path, *, quiet=True, write=None) -> Reproduction:
+    """`static_points_from_file` as `visjax euclidean --data` reports it: `estimate.npz`
+    (`t`, `features`, the recovered camera `A`, `R_c`, `x_c` over time), the figure
+    `euclidean` and the lines."""
+    from ..plots import plot_feature_estimates
+
+    bar = stages(2, "euclidean", quiet)
+    bar.set_postfix_str("estimate (compiles once)")
+    run = static_points_from_file(path)
+    bar.update()
+    title = f"adaptive structure estimator (Nath et al.) on {Path(path).name}"
+
+    def figure(t, truth, features, **kwargs):  # its order: the estimate, then the truth
+        return plot_feature_estimates(t, features, truth, title=title, **kwargs)
+
+    body = run.body
+    k = body["known_features"]
+    lines = [
+        f"Adaptive LS structure estimator (Nath et al., eqs. 37-51) on {path}: "
+        f"{body['frames']} frames, {k} known and {body['unknown_features']} unknown "
+        f"features; result: {body['result']}"
+    ]
+    for i, e in enumerate(body.get("final_position_error_m", [])):
+        lines.append(f"feature {k + i + 1}: final position error {e * 1000:8.3f} mm")
+    rep = _file_reproduction(run, "euclidean", figure, lines, write)
+    bar.update()
+    bar.close()
+    return rep

@@ -55,7 +55,9 @@ from ..estimators import (
     moving_camera_stream,
     run,
 )
+from ..io import Outputs
 from ..sim import add_pixel_noise, hold_indices, moving_camera_point, sample_times
+from ._reproduction import Reproduction, check_seeds, floats, median
 
 KC_TOOLBOX = ((560.98005, 0.0, 303.91196), (0.0, 749.53852, 345.99906), (0.0, 0.0, 1.0))
 KC_REFINED = ((551.9794, 0.0, 304.0282), (0.0, 737.5125, 331.5052), (0.0, 0.0, 1.0))
@@ -720,3 +722,385 @@ def _pose_matrix(R, p):
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, p
     return T
+
+
+# --------------------------------------------------------------------------------------
+# The reproductions that `visjax structure`, `visjax testbed` and `visjax reproduce` print
+# and write (`visjax.report`).
+
+TABLE_5_1 = {"toolbox": (0.0121, 0.0349, 0.0958), "least_squares": (0.0119, 0.0179, 0.0800)}
+"""Table 5-1 (set I.2): the RMS position error (m, x y z) with the toolbox $K_c$ and with
+the least-squares $K_c$ of section 2.3."""
+TABLE_5_2 = {"toolbox": (0.0172, 0.0248, 0.0548), "least_squares": (0.0172, 0.0170, 0.0519)}
+"""Table 5-2 (set II.1), as Table 5-1."""
+
+VPY_AMPLITUDES = (0.0, 0.05, 0.2, 0.5, 1.0, 2.0)
+"""The sensitivity study's amplitudes of the second unknown input $v_{py}$ (in the unit
+reading's length per second), fixed before any run."""
+
+
+def set_names(sets=None) -> list[str]:
+    """The thesis' sets asked for (all by default), checked by name."""
+    names = list(SETS) if not sets else list(sets)
+    for name in names:
+        if name not in SETS:
+            raise ValueError(f"unknown set {name!r}; choose from {list(SETS)}")
+    return names
+
+
+def table_lines(per_set: dict, names, who: str) -> list[str]:
+    """Tables 5-3 and 5-4 as printed lines: per set and axis, `who`'s RMS (or
+    "infeasible") and the thesis' in brackets."""
+    lines = []
+    for group, label in (("I.", "Table 5-3 (static point)"), ("II.", "Table 5-4 (moving point)")):
+        in_group = [n for n in names if n.startswith(group)]
+        if not in_group:
+            continue
+        lines += [
+            "",
+            f"{label}: {who} (thesis)",
+            f"{'':<4}" + "".join(f"{n:>20}" for n in in_group),
+        ]
+        for i, axis in enumerate("xyz"):
+            cells = []
+            for n in in_group:
+                rms = per_set[n]["rms"]
+                value = f"{rms[i]:.4f}" if rms is not None else "infeasible"
+                cells.append(f"{value:>11} ({per_set[n]['thesis_rms'][i]:.4f})")
+            lines.append(f"{axis:<4}" + "".join(cells))
+    return lines
+
+
+def structure_reproduction(
+    sets=None,
+    duration: float = 30.0,
+    noise_px: float = 0.1,
+    *,
+    seed: int = 0,
+    seeds: int = 1,
+    quiet=True,
+    write=None,
+) -> Reproduction:
+    """The UIO on the simulated analogues of the sets (`structure_experiment`), as `visjax
+    structure` reports it: per set the RMS position error beside the thesis' Tables
+    5-3/5-4, `sets.parquet` (one row per set and axis), per set `estimate_<set>.npz` (`t`,
+    `position`, `estimate`) and the figures `structure_<set>` (like Figs. 5-7/5-8) and
+    `camera_velocity_<set>` (like Figs. 5-5/5-6), each written as soon as its set is done.
+    With `seeds` > 1, the noise seeds `seed, ..., seed + seeds - 1`: each set's `rms` is
+    their median (each seed's in `rms_seeds`), `estimate` has a leading seed axis and the
+    figures show the median error and its 10-90 % band."""
+    import functools
+
+    from tqdm import tqdm
+
+    from ..plots import plot_camera_velocity, plot_structure
+
+    check_seeds(seeds, noise_px)
+    names = set_names(sets)
+    per_set = {}
+    for name in tqdm(names, desc="structure", unit="set", disable=quiet):
+        runs = [structure_experiment(name, duration, noise_px, seed=seed + i) for i in range(seeds)]
+        r = runs[0]
+        rms = [[float(x) for x in run.rms] for run in runs]
+        per_set[name] = {"rms": rms[0] if seeds == 1 else median(rms)}
+        if seeds > 1:
+            per_set[name]["rms_seeds"] = rms
+        per_set[name]["thesis_rms"] = list(SETS[name].thesis_rms)
+        if write is None:
+            continue
+        estimate = np.asarray(r.estimate) if seeds == 1 else np.stack([x.estimate for x in runs])
+        kind = "moving" if SETS[name].moving else "static"
+        arrays = dict(t=np.asarray(r.ts), position=np.asarray(r.position), estimate=estimate)
+        title = (
+            f"unknown input observer (Jang's thesis), set {name} ({kind} point), simulated: "
+            f"pixel noise {noise_px:g} px, camera 30 Hz, observer 1 kHz"
+        )
+        figures = {
+            f"structure_{name}": functools.partial(
+                plot_structure, r.ts, r.position, estimate, title=title
+            ),
+            f"camera_velocity_{name}": functools.partial(
+                plot_camera_velocity,
+                r.frame_ts,
+                r.camera_velocity,
+                title=f"Jang's thesis, set {name}: camera velocity (simulated analogue)",
+            ),
+        }
+        write(Outputs(arrays={f"estimate_{name}.npz": arrays}, figures=figures))
+    body = {"duration_s": duration, "noise_px": noise_px, "sets": per_set}
+    if seeds > 1:
+        body["seeds"] = seeds
+    if write is not None:
+        import pandas as pd
+
+        rows = [
+            {
+                "set": name,
+                "axis": axis,
+                "rms_m": per_set[name]["rms"][i],
+                "thesis_rms_m": per_set[name]["thesis_rms"][i],
+            }
+            for name in names
+            for i, axis in enumerate("xyz")
+        ]
+        write(Outputs(tables={"sets": pd.DataFrame(rows)}))
+    lines = [
+        f"Unknown input observer (Jang's thesis, eq. 3.5), simulated analogues: {duration:g} s, "
+        f"pixel noise {noise_px:g} px, RMS position error over the second half (m)"
+    ] + table_lines(per_set, names, "visjax")
+    return Reproduction(body, lines, settings={"sets": names}, seed=seed if noise_px > 0 else None)
+
+
+def testbed_record(run: TestbedRun) -> dict:
+    """One set's entry in the testbed's summary."""
+    return {
+        "rms": floats(run.rms),
+        "thesis_rms": list(SETS[run.set_name].thesis_rms),
+        "tracking_rms_px": float(run.tracking_rms_px) if run.feasible else None,
+        "units": run.units,
+        "rms_frames": floats(run.rms_frames),
+        "rms_ideal_pixels": floats(run.rms_ideal),
+        "feasible": bool(run.feasible),
+        "reason": run.reason,
+        "result": run.result,
+        "duration_s": run.duration,
+        "scoring": "RMS over the second half of the run: `rms` at every 1 kHz sample, "
+        "`rms_frames` at the 30 Hz camera samples only, `rms_ideal_pixels` at 1 kHz from "
+        "the exact projections instead of the tracked pixels",
+    }
+
+
+def testbed_video(run: TestbedRun, path, fps: float = 30.0) -> None:
+    """The rendered frames of a set with the tracked point (green circle) and the estimate
+    projected through the true camera (red cross) drawn on them, as an MP4."""
+    from ..frontend import annotate_frames, write_video
+
+    K = np.asarray(KC_REFINED, float)
+    est = np.asarray(run.estimate)[np.minimum(run.frame_index, run.estimate.shape[0] - 1)]
+    in_front = np.all(np.isfinite(est), axis=-1) & (est[:, 2] > 0)
+    z = np.where(in_front, est[:, 2], 1.0)
+    projected = (est[:, :2] / z[:, None]) @ K[:2, :2].T + K[:2, 2]
+    projected = np.where(in_front[:, None], projected, np.nan)
+    captions = [f"{run.set_name}  t = {t:5.2f} s" for t in np.asarray(run.frame_ts)]
+    write_video(path, annotate_frames(run.frames, run.pixels, projected, captions), fps)
+
+
+_TESTBED_ARRAYS = (
+    "ts",
+    "position",
+    "estimate",
+    "estimate_ideal",
+    "frame_ts",
+    "frame_index",
+    "pixels",
+    "pixels_true",
+    "velocity_true",
+    "velocity_measured",
+    "q_puma",
+)
+
+
+def testbed_reproduction(
+    sets=None,
+    units: str = "cm",
+    duration: float = 30.0,
+    *,
+    seed: int = 0,
+    video: bool = True,
+    studies: bool = True,
+    quiet=True,
+    write=None,
+) -> Reproduction:
+    """Chapters 4-5 on the testbed twin (`testbed`), as `visjax testbed` reports it: each set
+    end to end, Tables 5-3/5-4 beside the thesis', per set the figure `testbed_<set>`, its
+    arrays `testbed_<set>.npz` and (with `video`) the MP4 `testbed_<set>.mp4`, written as
+    soon as the set is done; `tables` (Parquet and CSV, one row per set and axis); with
+    `studies`, `testbed_studies`."""
+    import functools
+
+    from tqdm import tqdm
+
+    from ..plots import plot_testbed
+
+    names = set_names(sets)
+    if units not in UNITS:
+        raise ValueError(f"`units` must be one of {list(UNITS)}; got {units!r}")
+    per_set, runs = {}, {}
+    for name in tqdm(names, desc="testbed", unit="set", disable=quiet):
+        keep = write is not None and video
+        r = testbed(name, units=units, duration=duration, keep_frames=keep, seed=seed)
+        per_set[name] = testbed_record(r)
+        if write is not None:
+            kind = "moving" if SETS[name].moving else "static"
+            arrays = {k: np.asarray(getattr(r, k)) for k in _TESTBED_ARRAYS}
+            if r.q_arm is not None:
+                arrays["q_arm"] = np.asarray(r.q_arm)
+            title = (
+                f"Jang's thesis, set {name} ({kind} point) on the testbed twin: A read in "
+                f"{units}/s, camera 30 Hz, observer 1 kHz"
+            )
+            figures = {f"testbed_{name}": functools.partial(plot_testbed, r, title=title)}
+            videos = {}
+            if keep and r.frames is not None:
+                videos[f"testbed_{name}.mp4"] = functools.partial(testbed_video, r)
+            write(
+                Outputs(
+                    arrays={f"testbed_{name}.npz": arrays},
+                    figures=figures if r.feasible else {},
+                    videos=videos,
+                )
+            )
+        runs[name] = r.__class__(**{**r.__dict__, "frames": None})
+    lines = [
+        f"UIO (Jang's thesis, eq. 3.5) on the testbed twin: A read in {units}/s, "
+        f"{duration:g} s, RMS position error over the second half (m), at 1 kHz"
+    ] + table_lines(per_set, names, "twin")
+    lines += [f"{n}: {per_set[n]['reason']}" for n in names if not per_set[n]["feasible"]]
+    if studies:
+        lines += testbed_studies(runs, names, units, duration, seed, quiet=quiet, write=write)
+    if write is not None:
+        import pandas as pd
+
+        def cell(e, key, i):
+            return e[key][i] if e[key] else None
+
+        rows = [
+            {
+                "set": name,
+                "table": "5-3" if name.startswith("I.") else "5-4",
+                "axis": axis,
+                "units": units,
+                "rms_m": cell(per_set[name], "rms", i),
+                "rms_frames_m": cell(per_set[name], "rms_frames", i),
+                "rms_ideal_pixels_m": cell(per_set[name], "rms_ideal_pixels", i),
+                "thesis_rms_m": per_set[name]["thesis_rms"][i],
+                "feasible": per_set[name]["feasible"],
+            }
+            for name in names
+            for i, axis in enumerate("xyz")
+        ]
+        write(Outputs(tables={"tables": pd.DataFrame(rows)}, csv=("tables",)))
+    body = {"units": units, "duration_s": duration, "sets": per_set}
+    return Reproduction(body, lines, settings={"sets": names}, seed=seed)
+
+
+def testbed_studies(runs, names, units, duration, seed, *, quiet=True, write=None) -> list[str]:
+    """Section 2.3's least squares from set I.1's data with Tables 5-1/5-2 redone
+    (`calibration.json`), and the sensitivity of the moving sets to the amplitude of
+    $v_{py}$ (exact pixels, so that only $v_{py}$ varies; `sensitivity`, Parquet and CSV).
+    **Returns:** the printed lines."""
+    from tqdm import tqdm
+
+    from ..geometry import camera_matrix, camera_matrix_lstsq
+
+    lines = []
+    base = runs.get("I.1")
+    if base is not None and base.feasible:
+        cam = base.position[base.frame_index]
+        m = cam[:, :2] / cam[:, 2:]
+        ok = np.all(np.isfinite(base.pixels), axis=1)
+        theta = np.asarray(camera_matrix_lstsq(m[ok], base.pixels[ok]))
+        K_ls = np.asarray(camera_matrix(theta))
+        tables = {}
+        for set_name, table, thesis in (
+            ("I.2", "table_5_1", TABLE_5_1),
+            ("II.1", "table_5_2", TABLE_5_2),
+        ):
+            row = {"set": set_name, "thesis": {k: list(v) for k, v in thesis.items()}}
+            for label, K in (("toolbox", KC_TOOLBOX), ("least_squares", K_ls)):
+                r = testbed(set_name, units=units, duration=duration, Kc_observer=K, seed=seed)
+                row[label] = [float(x) for x in r.rms] if r.feasible else None
+            tables[table] = row
+        calibration = {
+            "theta_least_squares": [float(x) for x in theta],
+            "Kc_least_squares": K_ls.tolist(),
+            "Kc_true": np.asarray(KC_REFINED).tolist(),
+            "Kc_toolbox": np.asarray(KC_TOOLBOX).tolist(),
+            "Kc_thesis_least_squares": np.asarray(KC_REFINED).tolist(),
+            "frames_used": int(ok.sum()),
+            **tables,
+            "note": "the twin renders with the thesis' least-squares Kc as the true camera; "
+            "the observer is given the toolbox Kc or the least squares of section 2.3 from "
+            "set I.1's tracked pixels and the forward-kinematics truth",
+        }
+        true = ", ".join(f"{x:.2f}" for x in camera_matrix_to_theta(KC_REFINED))
+        lines += [
+            "",
+            "section 2.3 least squares from set I.1 (twin): [f, af, cx, cy] = "
+            + ", ".join(f"{x:.2f}" for x in theta)
+            + f"  (true {true})",
+        ]
+        for table, row in tables.items():
+            for label in ("toolbox", "least_squares"):
+                v = row[label]
+                cells = ", ".join(f"{x:.4f}" for x in v) if v else "infeasible"
+                th = ", ".join(f"{x:.4f}" for x in row["thesis"][label])
+                lines.append(f"{table} ({row['set']}), {label} Kc: {cells}   (thesis {th})")
+        if write is not None:
+            write(Outputs(json={"calibration.json": calibration}))
+    moving = [n for n in names if SETS[n].moving]
+    rows = []
+    for name in tqdm(moving, desc="v_py sensitivity", unit="set", disable=quiet or not moving):
+        for a in VPY_AMPLITUDES:
+            r = testbed(
+                name,
+                units=units,
+                duration=duration,
+                vp_amplitude=(SETS[name].vp_amplitude[0], a),
+                track=False,
+                seed=seed,
+            )
+            rms = r.rms if r.feasible else np.full(3, np.nan)
+            rows.append(
+                {
+                    "set": name,
+                    "units": units,
+                    "v_py_amplitude": a,
+                    "rms_x": float(rms[0]),
+                    "rms_y": float(rms[1]),
+                    "rms_z": float(rms[2]),
+                    "feasible": bool(r.feasible),
+                    "result": r.result,
+                }
+            )
+    if rows:
+        import pandas as pd
+
+        table = pd.DataFrame(rows)
+        lines += ["", f"sensitivity to v_py (amplitude in {units}/s; exact pixels), RMS (m):"]
+        lines += table.to_string(index=False, float_format=lambda x: f"{x:.4f}").splitlines()
+        if write is not None:
+            write(Outputs(tables={"sensitivity": table}, csv=("sensitivity",)))
+    return lines
+
+
+def camera_matrix_to_theta(K) -> list[float]:
+    """$[f, \\alpha f, c_x, c_y]$ of a camera matrix, the parameters of section 2.3."""
+    K = np.asarray(K, float)
+    return [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
+
+
+def reproduce_rows(structure: dict, testbed: dict) -> list[tuple]:
+    """The rows of `visjax reproduce`'s table for the thesis, from the summaries of
+    `structure_reproduction` and `testbed_reproduction`: (what, value, unit, reference,
+    reference kind)."""
+    rows = []
+    st = structure["sets"]
+    for group, what in (("I.", "static"), ("II.", "moving")):
+        names = [n for n in st if n.startswith(group)]
+        mean = float(np.mean([st[n]["rms"] for n in names]))
+        thesis = float(np.mean([st[n]["thesis_rms"] for n in names]))
+        rows.append((f"Jang's thesis, UIO, {what} point: mean RMS", mean, "m", thesis, "published"))
+    for name, e in testbed["sets"].items():
+        rms = e["rms"]
+        rows.append(
+            (
+                f"Jang's thesis, testbed twin set {name}: worst-axis RMS"
+                + ("" if rms is not None else " (infeasible)"),
+                max(rms) if rms is not None else None,
+                "m",
+                float(max(e["thesis_rms"])),
+                "published",
+            )
+        )
+    return rows
