@@ -30,16 +30,17 @@ def bare(n):
 
 from visjax.estimators import SaveAt, run
 if which == "velocity":
-    from visjax.estimators import VelocityEstimator, fixed_camera_stream
+    from visjax.estimators import VelocityEstimator, fixed_camera, velocity_stream
     from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
     sc = section6_scenario(2.0, 1000.0)
-    stream, _, _ = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0])
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    stream = velocity_stream(sc.ts, sc.pixels, camera)
     est, dt = VelocityEstimator(K=K_EQ63, rho=RHO_EQ63), None
 elif which == "uio":
-    from visjax.estimators import moving_camera_stream
+    from visjax.estimators import moving_point_stream
     from visjax.papers import jang
     sc = jang.scenario("II.1", 2.0)
-    stream = moving_camera_stream(sc.frame_ts, sc.frame_pixels, sc.frame_velocities, sc.Kc_observer)
+    stream = moving_point_stream(sc.frame_ts, sc.frame_pixels, sc.frame_velocities, sc.Kc_observer)
     est, dt = jang.observer("II.1"), 1e-3
 else:
     from visjax.papers import nath

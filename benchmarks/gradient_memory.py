@@ -42,8 +42,9 @@ from visjax.estimators import (  # noqa: E402
     SaveAt,
     VelocityEstimator,
     WindowRMS,
-    fixed_camera_stream,
+    fixed_camera,
     run,
+    velocity_stream,
 )
 from visjax.papers import chitrakaran  # noqa: E402
 
@@ -87,9 +88,8 @@ def gains(batch: int):
 
 def one_duration(duration: float, batch: int) -> dict:
     sc = chitrakaran.section6_scenario(duration, RATE_HZ)
-    stream, _, _ = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], truth=sc.velocity
-    )
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    stream = velocity_stream(sc.ts, sc.pixels, camera, truth=sc.velocity)
     a, b = chitrakaran.window(duration)
     reducer = WindowRMS(a, b, field="v_hat")
     rho = jnp.asarray(chitrakaran.RHO_EQ63)

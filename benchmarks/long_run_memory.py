@@ -3,7 +3,7 @@
 at 1 kHz) of the section-6 simulation. Prints JSON.
 
 The pixels are simulated first and written to a temporary `.npy` file; a fresh process
-then loads them, builds the stream (`fixed_camera_stream`, $n^*$ and $z_1^*$ given, the
+then loads them, builds the stream (`fixed_camera`, `velocity_stream`, $n^*$ and $z_1^*$ given, the
 result-code pass over every frame included) and runs the estimator, saving one output in
 1,000, and reports its peak resident memory (`VmHWM`, see `_memory.py`). The reference, in the same
 run, is the same process on the first 10^4 steps: the difference is what the length costs
@@ -27,7 +27,7 @@ sys.path.insert(0, sys.argv[4])
 from _memory import peak_rss_mb
 import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
-from visjax.estimators import SaveAt, VelocityEstimator, fixed_camera_stream, run
+from visjax.estimators import SaveAt, VelocityEstimator, FixedCamera, run, velocity_stream
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63
 from visjax import RESULTS
 
@@ -36,10 +36,8 @@ c = np.load(folder + "/constants.npz")
 pixels = np.load(folder + "/pixels.npy", mmap_mode="r")[:steps]
 ts = np.arange(steps) * 1e-3
 t0 = time.perf_counter()
-stream, _, _ = fixed_camera_stream(
-    ts, pixels, c["A"], c["R_star"], c["s1"], n_star=c["n_star"], z1_star=c["z1_star"],
-    chunk=chunk,
-)
+camera = FixedCamera(pixels[0], c["A"], c["R_star"], c["s1"], c["n_star"], c["z1_star"])
+stream = velocity_stream(ts, pixels, camera, chunk=chunk)
 sol = run(VelocityEstimator(K=K_EQ63, rho=RHO_EQ63), stream, saveat=SaveAt(every=1000))
 v = np.asarray(sol.outputs.v_hat)
 print(json.dumps({

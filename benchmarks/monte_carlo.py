@@ -6,7 +6,7 @@ J and J^-1 are recomputed from each trajectory's noisy pixels. Prints JSON.
 The run of one trajectory is `papers.velocity_problem(noise_px=0.1)`'s estimator (the section-6
 simulation at 1 kHz, the published gains of eq. (63), the windowed RMS reduced in the loop,
 nothing saved per step): Gaussian noise drawn for the trajectory's pixels, the stream
-(`fixed_camera_stream`: its preprocessing fused with the time loop, `chunk` frames at a
+(`fixed_camera`, `velocity_stream`: its preprocessing fused with the time loop, `chunk` frames at a
 time), the estimator's loop. `jit(vmap)` over `--batch` noise keys.
 
 References timed in the same run, on the same trajectories:
@@ -52,11 +52,13 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the test
 from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
 from visjax import papers  # noqa: E402
 from visjax.estimators import (  # noqa: E402
+    FixedCamera,
     SaveAt,
     VelocityEstimator,
     WindowRMS,
-    fixed_camera_stream,
+    fixed_camera,
     run,
+    velocity_stream,
 )
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario  # noqa: E402
 
@@ -94,16 +96,19 @@ def main():
     keys = jax.random.split(jax.random.key(0), args.batch)
 
     # the study, with the chunk size of the fused preprocessing set here
-    stream0, n_star, z1_star = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0])
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    stream0 = velocity_stream(sc.ts, sc.pixels, camera)
+    n_star, z1_star = camera.n_star, camera.z1_star
     reducer = WindowRMS(0.5 * args.duration, args.duration + 1e-9, field="v_hat")
     est = VelocityEstimator(K=K_EQ63, rho=RHO_EQ63)
 
     def one(key):
         noise = 0.1 * jax.random.normal(key, sc.pixels.shape, dtype=sc.pixels.dtype)
-        stream, _, _ = fixed_camera_stream(
-            sc.ts, sc.pixels + noise, sc.A, sc.R_star, sc.s[0], n_star=n_star,
-            z1_star=z1_star, truth=sc.velocity, throw=False, chunk=args.chunk,
-        )  # fmt: skip
+        pixels = sc.pixels + noise
+        camera = FixedCamera(pixels[0], sc.A, sc.R_star, sc.s[0], n_star, z1_star)
+        stream = velocity_stream(
+            sc.ts, pixels, camera, truth=sc.velocity, throw=False, chunk=args.chunk
+        )
         sol = run(est, stream, saveat=SaveAt(outputs=False), reducer=reducer, throw=False)
         return sol.summary.rms, sol.result._value
 

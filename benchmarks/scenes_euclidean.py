@@ -4,7 +4,7 @@ are not the paper's (nor the project's). Prints a JSON table.
 
 Each scene was fixed before any run, from its description (now in `visjax.sim`'s catalogue:
 their docstrings give every parameter); the estimator is built with
-`AdaptiveStructureEstimator.from_nominal` from the nominal camera and the measurements only,
+`StaticPointsEstimator.from_nominal` from the nominal camera and the measurements only,
 its gains derived by the documented rule (nothing tuned per scene). For each scene, noise-free
 and with 0.5 px of pixel noise (seed 0): the final position error of each unknown feature
 (mm) after the run, the recovered camera's errors, the final camera prediction error (px),
@@ -29,11 +29,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from visjax.estimators import (
-    AdaptiveStructureEstimator,
     SaveAt,
+    StaticPointsEstimator,
     pe_measure,
-    platform_stream,
     run,
+    static_points_stream,
 )
 from visjax.geometry import camera_parameters, so3_log
 from visjax.sim import add_pixel_noise, side_looking_platform_scene, tilted_platform_scene
@@ -64,8 +64,8 @@ def run_scene(sc: dict, noise_px: float, seed: int = 0) -> dict:
     if noise_px > 0:
         k1, k2 = jax.random.split(jax.random.key(seed))
         p_s, p_c = add_pixel_noise(k1, p_s, noise_px), add_pixel_noise(k2, p_c, noise_px)
-    stream = platform_stream(sc["ts"], sc["R_b"], sc["x_b"], p_s, p_c, sc["omega_c"])
-    est = AdaptiveStructureEstimator.from_nominal(stream, *sc["nominal"], dt=sc["dt"])
+    stream = static_points_stream(sc["ts"], sc["R_b"], sc["x_b"], p_s, p_c, sc["omega_c"])
+    est = StaticPointsEstimator.from_nominal(stream, *sc["nominal"], dt=sc["dt"])
     steps_per_s = 1000
     t0 = time.perf_counter()
     sol = run(est, stream, dt=sc["dt"], saveat=SaveAt(every=steps_per_s, diagnostics=True))
@@ -77,7 +77,7 @@ def run_scene(sc: dict, noise_px: float, seed: int = 0) -> dict:
     R_err = so3_log(out.R_c[-1] @ sc["R_c"].T)
     pe = np.asarray(pe_measure(d.info_rate_s, sol.ts, 5.0))
     t1, t2 = camera_parameters(est.N @ sc["A"], sc["R_c"], sc["x_c"])
-    true_est = AdaptiveStructureEstimator(
+    true_est = StaticPointsEstimator(
         **{k: getattr(est, k) for k in ("alpha_c", "alpha", "eta0", "eta1", "gamma_s0", "D")},
         eps_c=est.eps_c,
         eps_s=est.eps_s,

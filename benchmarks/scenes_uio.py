@@ -32,7 +32,7 @@ Designs: `fixed_A_peak`, the thesis' form ($A$ frozen at the peak velocity, (3.6
 bound 100); `motion_line_D`, the same with $D_1$ along the target's (known) direction of
 motion instead of the UUB split (`circle_diagonal` `motion` is the UUB split). Results
 (20 s, RMS over 10-20 s, metres; 45 of 1000 frames dropped where stated, replaced by
-`moving_camera_stream(dropped="hold")` or `dropped="extrapolate"`):
+`moving_point_stream(dropped="hold")` or `dropped="extrapolate"`):
 
 | scene | design | noise (px) | dropped | x | y | z |
 |---|---|---|---|---|---|---|

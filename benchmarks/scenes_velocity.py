@@ -27,9 +27,10 @@ from visjax import RESULTS, sim  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     SaveAt,
     VelocityEstimator,
-    fixed_camera_stream,
+    fixed_camera,
     lowpass,
     run,
+    velocity_stream,
 )
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63  # noqa: E402
 
@@ -38,9 +39,9 @@ def evaluate(name, scene, dt=None, filter_hz=None, **info):
     ts, pixels, A, body, s = (scene[k] for k in ("ts", "pixels", "A", "body", "features"))
     i, j = scene["known_pair"]
     L = jnp.linalg.norm(s[i] - s[j])
-    stream, n_star, z1 = fixed_camera_stream(
-        ts, pixels, A, body.R[0], s[0], known_length=(i, j, L), dropouts=True
-    )
+    camera = fixed_camera(pixels, A, body.R[0], s[0], known_length=(i, j, L), dropouts=True)
+    stream = velocity_stream(ts, pixels, camera, dropouts=True)
+    z1 = camera.z1_star
     sol = run(VelocityEstimator(K=K_EQ63, rho=RHO_EQ63), stream, dt=dt, saveat=SaveAt())
     t = np.asarray(sol.ts)
     v = sol.outputs.v_hat

@@ -8,7 +8,7 @@ Prints JSON. The paper's section-6 scenario, 10 s at 1 kHz (10,000 samples):
   per step from the paper (homography, decomposition, e, J, Euler step) in NumPy (best of
   `--numpy-repeats` runs, interleaved with the visjax rounds).
 - `visjax_one_s`: the same with visjax after compilation, as a user runs one long
-  trajectory: `fixed_camera_stream(..., chunk=--chunk)` (the per-frame reconstruction, e,
+  trajectory: `velocity_stream(..., chunk=--chunk)` (the per-frame reconstruction, e,
   J^-1, fused with the loop in chunks of that many frames: the default 10,000 is the whole
   run, 7 MB of prepared frames) and `run(..., unroll=--unroll)` (8 steps per iteration of
   the compiled loop). `visjax_one_default_s`: with the defaults of both (chunks of 256
@@ -36,13 +36,14 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the test
 
 from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
 from visjax.estimators import (  # noqa: E402
+    FixedCamera,
     SaveAt,
     Stream,
     VelocityEstimator,
     WindowRMS,
-    fixed_camera_stream,
     run,
     velocity_measurements,
+    velocity_stream,
 )
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario  # noqa: E402
 
@@ -83,7 +84,7 @@ def main():
     def one_prepared(pixels, K, rho):
         ys = jax.vmap(
             lambda pc: velocity_measurements(
-                pixels[0], pc, sc.A, sc.R_star, sc.s[0], sc.z1_star, sc.n_star
+                FixedCamera(pixels[0], sc.A, sc.R_star, sc.s[0], sc.n_star, sc.z1_star), pc
             )
         )(pixels)
         return run(VelocityEstimator(K=K, rho=rho), Stream(ts=sc.ts, ys=ys)).outputs.v_hat
@@ -92,10 +93,8 @@ def main():
         @jax.jit
         def one(pixels, K, rho):
             # the users' path: the stream's preprocessing fused with the loop, in chunks
-            stream, _, _ = fixed_camera_stream(
-                sc.ts, pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star,
-                z1_star=sc.z1_star, throw=False, **chunk,
-            )  # fmt: skip
+            camera = FixedCamera(pixels[0], sc.A, sc.R_star, sc.s[0], sc.n_star, sc.z1_star)
+            stream = velocity_stream(sc.ts, pixels, camera, throw=False, **chunk)
             return run(VelocityEstimator(K=K, rho=rho), stream, **unroll).outputs.v_hat
 
         return one
@@ -119,7 +118,7 @@ def main():
 
     ys = jax.vmap(
         lambda pc: velocity_measurements(
-            sc.pixels[0], pc, sc.A, sc.R_star, sc.s[0], sc.z1_star, sc.n_star
+            FixedCamera(sc.pixels[0], sc.A, sc.R_star, sc.s[0], sc.n_star, sc.z1_star), pc
         )
     )(sc.pixels)
     stream = Stream(ts=sc.ts, ys=ys, truth=sc.velocity)

@@ -6,7 +6,7 @@ noise seeds each: the worst-axis RMS error over the second half of the run (line
 angular rad/s), (a) with the paper's gains of eq. (63), (b) the same estimate through the
 causal low-pass filter `visjax.estimators.lowpass` at several bandwidths (its delay
 stated), (c) with the gains scaled down. The grids are fixed in advance (no value chosen
-to match anything); prints JSON (docs/papers/chitrakaran.md).
+to match anything); prints JSON (docs/papers/velocity.md).
 
     python benchmarks/velocity_noise.py [--duration 10] [--seeds 4]
 """
@@ -28,10 +28,11 @@ from make_example_data import velocity_example  # noqa: E402
 from visjax import RESULTS  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     VelocityEstimator,
-    fixed_camera_stream,
+    fixed_camera,
     lowpass,
     lowpass_delay,
     run,
+    velocity_stream,
 )
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario  # noqa: E402
 
@@ -94,17 +95,19 @@ def velocity_example_clean(duration):
 def study(duration: float, seeds: int) -> dict:
     rows = []
     for name, sc in _scenes(duration):
-        _, n_star, z1_star = fixed_camera_stream(
-            sc["ts"], sc["clean"], sc["A"], sc["R_star"], sc["s1"], known_length=sc["known_length"]
+        camera = fixed_camera(
+            sc["clean"], sc["A"], sc["R_star"], sc["s1"], known_length=sc["known_length"]
         )
+        n_star, z1_star = camera.n_star, camera.z1_star
         half = np.asarray(sc["ts"]) >= duration / 2
 
         @jax.jit
         def estimates(key, sigma, K, rho, sc=sc, n_star=n_star, z1_star=z1_star):
             pixels = sc["clean"] + sigma * jax.random.normal(key, sc["clean"].shape)
-            stream, _, _ = fixed_camera_stream(
-                sc["ts"], pixels, sc["A"], sc["R_star"], sc["s1"], n_star=n_star, z1_star=z1_star
+            camera = fixed_camera(
+                pixels, sc["A"], sc["R_star"], sc["s1"], n_star=n_star, z1_star=z1_star
             )
+            stream = velocity_stream(sc["ts"], pixels, camera)
             sol = run(VelocityEstimator(K=K, rho=rho), stream, throw=False)
             return sol.outputs.v_hat, sol.result
 

@@ -39,21 +39,21 @@ def velocity_example(
 
 def structure_example(
     duration: float = 20.0, seed: int = 0, noise_px: float = 0.1
-) -> io.StructureData:
+) -> io.MovingPointData:
     """The moving-camera scene of the module docstring (`sim.sideways_camera_record`): the
     camera's velocity at 200 Hz, its frames at 50 Hz (pixel noise `noise_px`), the truth at
     the frames."""
-    return io.StructureData(**sim.sideways_camera_record(duration, seed, noise_px))
+    return io.MovingPointData(**sim.sideways_camera_record(duration, seed, noise_px))
 
 
 def euclidean_example(
     duration: float = 40.0, seed: int = 0, noise_px: float = 0.2, dropout: float = 0.02
-) -> io.EuclideanData:
+) -> io.StaticPointsData:
     """The uncalibrated-camera scene of the module docstring (`sim.tilted_platform_record`),
     logged at 200 Hz: fx 900 px, a 91.5 degree pixel grid, principal point (524, 371); the
     camera 27 degrees down with a 2 degree tilt that the nominal mounting does not know; 6
     known and 5 unknown features 2-3.2 m away; a slow platform."""
-    return io.EuclideanData(**sim.tilted_platform_record(duration, seed, noise_px, dropout))
+    return io.StaticPointsData(**sim.tilted_platform_record(duration, seed, noise_px, dropout))
 
 
 def main(argv=None):

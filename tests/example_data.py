@@ -14,13 +14,13 @@ def velocity_example(
 
 def structure_example(
     duration: float = 20.0, seed: int = 0, noise_px: float = 0.1
-) -> io.StructureData:
+) -> io.MovingPointData:
     """`structure.npz`: `sim.sideways_camera_record`."""
-    return io.StructureData(**sim.sideways_camera_record(duration, seed, noise_px))
+    return io.MovingPointData(**sim.sideways_camera_record(duration, seed, noise_px))
 
 
 def euclidean_example(
     duration: float = 40.0, seed: int = 0, noise_px: float = 0.2, dropout: float = 0.02
-) -> io.EuclideanData:
+) -> io.StaticPointsData:
     """`euclidean.npz`: `sim.tilted_platform_record`."""
-    return io.EuclideanData(**sim.tilted_platform_record(duration, seed, noise_px, dropout))
+    return io.StaticPointsData(**sim.tilted_platform_record(duration, seed, noise_px, dropout))

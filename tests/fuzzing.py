@@ -834,10 +834,11 @@ def fuzz_streams(n, seed, dtype):
     from visjax.estimators import (
         SaveAt,
         VelocityEstimator,
-        fixed_camera_stream,
-        moving_camera_stream,
-        platform_stream,
+        fixed_camera,
+        moving_point_stream,
         run,
+        static_points_stream,
+        velocity_stream,
     )
     from visjax.papers import chitrakaran, jang, nath
 
@@ -858,7 +859,7 @@ def fuzz_streams(n, seed, dtype):
 
         return go
 
-    # fixed_camera_stream (Chitrakaran et al.): e against the true motion (eqs. (18)-(28))
+    # velocity_stream (Chitrakaran et al.): e against the true motion (eqs. (18)-(28))
     sc = chitrakaran.section6_scenario(10.0, 1000.0)
     P, R, x_f, s = (np.asarray(v, float) for v in (sc.pixels, sc.R, sc.x_f, sc.s))
     A = np.asarray(sc.A, dtype)
@@ -867,16 +868,10 @@ def fuzz_streams(n, seed, dtype):
     ts = np.asarray(np.arange(T) * 1e-3, dtype)
 
     def fixed(pixels, R_star, n_star, z1_star):
-        stream, _, _ = fixed_camera_stream(
-            ts,
-            pixels,
-            A,
-            R_star,
-            np.asarray(s[0], dtype),
-            n_star=n_star,
-            z1_star=z1_star,
-            throw=False,
+        camera = fixed_camera(
+            pixels, A, R_star, np.asarray(s[0], dtype), n_star=n_star, z1_star=z1_star, throw=False
         )
+        stream = velocity_stream(ts, pixels, camera, throw=False)
         return stream
 
     build_fixed = _vm(lambda *a: fixed(*a).measured().ys)
@@ -916,9 +911,9 @@ def fuzz_streams(n, seed, dtype):
             scale = np.maximum(np.max(np.abs(e_true), (1, 2)), 1.0)
             err = np.max(np.abs(e - e_true), (1, 2)) / scale
             _classify(ok, np.all(np.isfinite(e.reshape(n, -1)), 1), err, tol_e, c)
-        out.setdefault("fixed_camera_stream", {})[kind] = c
+        out.setdefault("velocity_stream", {})[kind] = c
 
-    # moving_camera_stream (Jang): y = K_c^{-1} p (eq. (3.1)), u passed through
+    # moving_point_stream (Jang): y = K_c^{-1} p (eq. (3.1)), u passed through
     th = jang.scenario("II.1", 10.0)
     F_p, F_u = np.asarray(th.frame_pixels, float), np.asarray(th.frame_velocities, float)
     observer = jang.observer("II.1")
@@ -926,7 +921,7 @@ def fuzz_streams(n, seed, dtype):
     frame_ts = np.asarray(np.arange(T) * 0.033, dtype)
 
     def moving(pixels, velocities, K_c):
-        return moving_camera_stream(frame_ts, pixels, velocities, K_c)
+        return moving_point_stream(frame_ts, pixels, velocities, K_c)
 
     build_moving = _vm(lambda *a: moving(*a).ys)
     run_moving = _vm(lambda *a: run_result(observer, 1e-3)(moving(*a)))
@@ -962,9 +957,9 @@ def fuzz_streams(n, seed, dtype):
             err = np.maximum(err, np.max(np.abs(np.asarray(ys.u, float) - args[1]), (1, 2)))
             finite = np.all(np.isfinite(y.reshape(n, -1)), 1)
             _classify(np.ones(n, bool), finite, err, 64 * float(np.finfo(dtype).eps), c)
-        out.setdefault("moving_camera_stream", {})[kind] = c
+        out.setdefault("moving_point_stream", {})[kind] = c
 
-    # platform_stream (Nath et al.): the known features' regressors (eq. (12))
+    # static_points_stream (Nath et al.): the known features' regressors (eq. (12))
     ns = nath.scenario(2.0)
     R_b, x_b, p_s, p_c = (np.asarray(v, float) for v in (ns.R_b, ns.x_b, ns.p_s, ns.p_c))
     omega_c = np.asarray(ns.omega_c, float)
@@ -972,7 +967,7 @@ def fuzz_streams(n, seed, dtype):
     ts = np.asarray(np.arange(T) * 1e-3, dtype)
 
     def platform(R_b, x_b, p_s, p_c, omega_c):
-        return platform_stream(ts, R_b, x_b, p_s, p_c, omega_c)
+        return static_points_stream(ts, R_b, x_b, p_s, p_c, omega_c)
 
     build_platform = _vm(lambda *a: platform(*a).ys)
     run_platform = _vm(lambda *a: run_result(est_a)(platform(*a)))
@@ -1028,7 +1023,7 @@ def fuzz_streams(n, seed, dtype):
                 np.isfinite(Pi.reshape(n, -1)), 1
             )
             _classify(np.ones(n, bool), finite, err, 64 * float(np.finfo(dtype).eps), c)
-        out.setdefault("platform_stream", {})[kind] = c
+        out.setdefault("static_points_stream", {})[kind] = c
     return out
 
 

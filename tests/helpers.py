@@ -45,16 +45,16 @@ class without_jaxtyping:
 
 def euclidean_scene_file(path, duration: float, rate_hz: float):
     """The project's scene of Nath et al. (`papers.nath.scenario`) written as a
-    `EuclideanData` file at `path`, with its nominal camera and true features."""
+    `StaticPointsData` file at `path`, with its nominal camera and true features."""
     import jax.numpy as jnp
     import numpy as np
 
-    from visjax.io import EuclideanData
+    from visjax.io import StaticPointsData
     from visjax.papers import nath
 
     sc = nath.scenario(duration, rate_hz)
     A0, R0, x0 = nath.nominal_camera()
-    return EuclideanData(
+    return StaticPointsData(
         t=np.asarray(sc.ts),
         pixels=np.asarray(jnp.concatenate([sc.p_c, sc.p_s], 1)),
         platform_R=np.asarray(sc.R_b),

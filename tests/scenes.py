@@ -18,9 +18,9 @@ from visjax import sim
 from visjax.design import design_uio, design_uio_for_motion
 from visjax.estimators import (
     THESIS_A_U,
+    MovingPointObserver,
     SaveAt,
-    UnknownInputObserver,
-    moving_camera_stream,
+    moving_point_stream,
     run,
 )
 from visjax.sim import add_pixel_noise
@@ -46,13 +46,13 @@ scene = sim.moving_target_scene
 def camera_stream(truth, noise_px: float = 0.0, key=None, drop=None, dropped="hold"):
     """The 50 Hz frames of a scene: pixels (noise, dropped frames: NaN, out of view: NaN)
     and the camera velocity; `drop` a boolean mask over the frames; `dropped` how the
-    stream replaces a missing frame (`moving_camera_stream`)."""
+    stream replaces a missing frame (`moving_point_stream`)."""
     step = RATE_HZ // CAMERA_HZ
     frames = slice(0, None, step)
     pixels = add_pixel_noise(key, truth.pixels[frames], noise_px)
     if drop is not None:
         pixels = jnp.where(jnp.asarray(drop)[:, None], jnp.nan, pixels)
-    return moving_camera_stream(
+    return moving_point_stream(
         truth.ts[frames], pixels, truth.camera_velocity[frames], K_C, dropped=dropped
     )
 
@@ -116,10 +116,10 @@ def design(name: str, option: str, **grid):
     raise ValueError(option)
 
 
-def observer(name: str, fields) -> UnknownInputObserver:
+def observer(name: str, fields) -> MovingPointObserver:
     s = SCENES[name]
     fields = {"D": s["D1"], "D2": s["D2"], **fields}
-    return UnknownInputObserver(x3_guess=X3_GUESS, **fields)
+    return MovingPointObserver(x3_guess=X3_GUESS, **fields)
 
 
 def rms_last_half(name: str, obs, truth, stream, throw: bool = True):

@@ -97,7 +97,8 @@ def test_site_builds_strict_with_every_public_name(site):
     visjax adds to diffrax's. One test, so that under pytest-xdist the site is built once."""
     out, elapsed = site
     print(f"mkdocs build --strict: {elapsed:.1f} s")
-    for page in ("index", "papers/chitrakaran", "papers/jang", "papers/nath", "runner"):
+    pages = ("index", "papers/velocity", "papers/moving_point", "papers/static_points", "runner")
+    for page in pages:
         assert (out / page.removesuffix("index") / "index.html").exists(), page
 
     html = "\n".join(p.read_text() for p in sorted((out / "api").rglob("*.html")))

@@ -37,7 +37,7 @@ def _check(report, complete=True, streams=True):
     }
     assert public <= covered, public - covered
     if streams:
-        for builder in ("fixed_camera_stream", "moving_camera_stream", "platform_stream"):
+        for builder in ("velocity_stream", "moving_point_stream", "static_points_stream"):
             assert builder in report["functions"]
     for name, per_kind in report["functions"].items():
         # the invalid reconstruction inputs include bad intrinsics, which the homography

@@ -20,17 +20,17 @@ SHORT = {"VISJAX_NB_SHORT": "1"}
 
 # name -> (printed lines that must appear, estimator class of a paper notebook or None)
 CASES = {
-    "velocity_fixed_camera.ipynb": (
+    "velocity.ipynb": (
         ("z1* measured", "result: successful", "traces so far: 1", "seeds in"),
         "VelocityEstimator",
     ),
-    "uio_moving_camera.ipynb": (
+    "moving_point.ipynb": (
         ("rank condition (3.20): True", "result: successful", "traces so far: 1", "seeds in"),
-        "UnknownInputObserver",
+        "MovingPointObserver",
     ),
-    "uncalibrated_structure.ipynb": (
+    "static_points.ipynb": (
         ("covariance resets", "result: successful", "traces so far: 1", "seeds in"),
-        "AdaptiveStructureEstimator",
+        "StaticPointsEstimator",
     ),
     "gain_tuning.ipynb": (
         ("held-out improvement", "certified Lipschitz bound", "central difference", "10 %"),
@@ -43,9 +43,9 @@ CASES = {
 }
 # notebooks that print "relative difference: x" for a derivative against finite differences
 GRADIENT_NOTEBOOKS = {
-    "velocity_fixed_camera.ipynb",
-    "uio_moving_camera.ipynb",
-    "uncalibrated_structure.ipynb",
+    "velocity.ipynb",
+    "moving_point.ipynb",
+    "static_points.ipynb",
     "gain_tuning.ipynb",
 }
 
@@ -91,7 +91,7 @@ def _transformed(tree) -> dict[str, set[str]]:
 
 def _calls(tree) -> dict[str, set[str]]:
     """For each function defined in `tree`, the names it calls (each dotted name's parts:
-    `AdaptiveStructureEstimator.from_nominal` gives both)."""
+    `StaticPointsEstimator.from_nominal` gives both)."""
     out = {}
     for node in ast.walk(tree):
         if isinstance(node, ast.FunctionDef):

@@ -30,8 +30,7 @@ Conventions, shared by every `plot_*` function:
   each line is the median over the S seeds, with the 10-90 % band over seeds shaded in its
   colour; the truth may be (N, d) (the same for every seed) or (S, N, d).
 - **Titles** name the method by its authors ("Chitrakaran et al.", "Jang's thesis",
-  "Nath et al."); a title that still says "seed 000", "seed 003" or "seed 004" is rewritten
-  so. Figures for a paper are usually better without a title (`title=None`): the caption
+  "Nath et al."). Figures for a paper are usually better without a title (`title=None`): the caption
   says it.
 """
 
@@ -84,7 +83,6 @@ _STYLE = {
 _TRUTH = {"color": "k", "ls": "--", "lw": 0.8, "zorder": 3.0, "gid": "truth"}
 _ESTIMATE_LW = 1.0
 _ZERO = {"color": "0.6", "lw": 0.5, "zorder": 1.0}
-_AUTHORS = {"000": "Chitrakaran et al.", "003": "Jang's thesis", "004": "Nath et al."}
 _METADATA = {"png": {"Software": None}, "pdf": {"CreationDate": None}, "svg": {"Date": None}}
 
 DOF_LABELS = (
@@ -146,15 +144,6 @@ def _subplots(plt, nrows, ncols, width, height, **kwargs):
     return plt.subplots(nrows, ncols, figsize=(width, height), squeeze=False, **kwargs)
 
 
-def _title(title: str) -> str:
-    """The title with the papers named by their authors instead of by seed number."""
-
-    def by_authors(match):
-        return _AUTHORS.get(match.group(1), match.group(0))
-
-    return re.sub(r"\bseeds? (\d{3})\b", by_authors, title)
-
-
 def _unit_label(label: str) -> str:
     """`"... (m)"` -> `"... [m]"`: a trailing parenthesised unit shown in brackets."""
     label = str(label)
@@ -173,7 +162,7 @@ def _finish(fig, title, path, formats):
     if title:
         chars = max(30, int(fig.get_figwidth() * 13))
         # a number and its unit stay on one line
-        text = re.sub(r"(\d) (?=[^\W\d])", "\\1\u00a0", _title(str(title)))
+        text = re.sub(r"(\d) (?=[^\W\d])", "\\1\u00a0", str(title))
         fig.suptitle(textwrap.fill(text, chars), fontsize=_STYLE["figure.titlesize"])
     for ax in fig.axes:
         # ticks are made at draw time: keep their size when drawn outside the rc_context

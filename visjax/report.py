@@ -102,7 +102,7 @@ def velocity_data_report(path, out=None, quiet=False, filter_hz=None, formats=("
 
 
 def structure_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
-    """The unknown input observer of Jang's thesis on a user's `visjax.io.StructureData`
+    """The unknown input observer of Jang's thesis on a user's `visjax.io.MovingPointData`
     file (`papers.moving_point_file_reproduction`): `summary.json` (kind
     `structure_data`), `estimate.npz` and `structure.<format>`."""
     from .papers import moving_point_file_reproduction
@@ -118,7 +118,7 @@ def structure_data_report(path, out=None, quiet=False, formats=("png",)) -> dict
 
 def euclidean_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
     """The adaptive structure estimator of Nath et al. on a user's
-    `visjax.io.EuclideanData` file (`papers.static_points_file_reproduction`):
+    `visjax.io.StaticPointsData` file (`papers.static_points_file_reproduction`):
     `summary.json` (kind `euclidean_data`), `estimate.npz` and `euclidean.<format>`."""
     from .papers import static_points_file_reproduction
 

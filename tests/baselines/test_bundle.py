@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from visjax._results import RESULTS
-from visjax.baselines import bundle_adjustment, bundle_adjustment_residuals, euclidean_ekf
+from visjax.baselines import bundle_adjustment, bundle_adjustment_residuals, static_points_ekf
 from visjax.papers import nath
 
 ba = eqx.filter_jit(bundle_adjustment)
-ekf = eqx.filter_jit(euclidean_ekf)
+ekf = eqx.filter_jit(static_points_ekf)
 
 
 def errors(sol, sc, k=-1):
@@ -141,4 +141,4 @@ def test_bad_arguments(scenes, no_jaxtyping):
     with pytest.raises(ValueError, match="window"):
         bundle_adjustment(est, stream, clean.omega_c, window=0)
     with pytest.raises(ValueError, match="estimator"):
-        euclidean_ekf(None, stream, clean.omega_c)
+        static_points_ekf(None, stream, clean.omega_c)

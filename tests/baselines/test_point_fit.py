@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 
 from visjax._results import RESULTS
-from visjax.baselines import triangulate_point, triangulation_residuals, uio_ekf
-from visjax.estimators import moving_camera_stream
+from visjax.baselines import moving_point_ekf, triangulate_point, triangulation_residuals
+from visjax.estimators import moving_point_stream
 from visjax.sim import moving_camera_point
 
 RATE = 30.0
 TS = jnp.arange(150.0) / RATE
 KC = jnp.array([[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]])
 triangulate = eqx.filter_jit(triangulate_point)
-ekf = eqx.filter_jit(uio_ekf)
+ekf = eqx.filter_jit(moving_point_ekf)
 
 
 def held(f):
@@ -32,7 +32,7 @@ def scene(rotation, v_p, stop=jnp.inf):
 
     x = moving_camera_point(held(u), lambda t: v_p, jnp.array([0.1, -0.05, 1 / 1.5]), TS)
     pixels = x[:, :2] @ KC[:2, :2].T + KC[:2, 2][None]
-    stream = moving_camera_stream(TS, pixels, jax.vmap(held(u))(TS), KC)
+    stream = moving_point_stream(TS, pixels, jax.vmap(held(u))(TS), KC)
     position = jnp.stack([x[:, 0] / x[:, 2], x[:, 1] / x[:, 2], 1 / x[:, 2]], 1)
     return stream, np.asarray(position)
 
@@ -103,7 +103,9 @@ def test_vmap_over_noise_seeds_flags_the_bad_seed(static):
         s = eqx.tree_at(lambda s: s.ys.y, stream, y)
         return (
             triangulate_point(s, window=30, throw=False),
-            uio_ekf(s, r_norm=1e-4, depth0=1.0, sigma_depth0=0.5, q_velocity=0.0, throw=False),
+            moving_point_ekf(
+                s, r_norm=1e-4, depth0=1.0, sigma_depth0=0.5, q_velocity=0.0, throw=False
+            ),
         )
 
     tri, filt = eqx.filter_jit(jax.vmap(both))(ys)
@@ -136,4 +138,4 @@ def test_bad_arguments(static, no_jaxtyping):
     with pytest.raises(ValueError, match="order"):
         triangulate_point(stream, window=10, order=3)
     with pytest.raises(ValueError, match="stream"):
-        uio_ekf(None, r_norm=1e-4, depth0=1.0, sigma_depth0=0.5, q_velocity=0.0)
+        moving_point_ekf(None, r_norm=1e-4, depth0=1.0, sigma_depth0=0.5, q_velocity=0.0)

@@ -20,8 +20,9 @@ from visjax.estimators import (
     Stream,
     VelocityEstimator,
     WindowRMS,
-    fixed_camera_stream,
+    fixed_camera,
     run,
+    velocity_stream,
 )
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
 
@@ -43,10 +44,8 @@ def _with_chunk(stream, chunk):
 def streams():
     sc = section6_scenario(0.3, 1000.0)
     noisy = sc.pixels + 0.05 * jax.random.normal(jax.random.key(1), sc.pixels.shape)
-    stream, _, _ = fixed_camera_stream(
-        sc.ts, noisy, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star,
-        truth=sc.velocity, chunk=64,
-    )  # fmt: skip
+    camera = fixed_camera(noisy, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star)
+    stream = velocity_stream(sc.ts, noisy, camera, truth=sc.velocity, chunk=64)  # fmt: skip
     return stream, stream.measured()
 
 
@@ -79,10 +78,10 @@ def test_held_samples_and_dropped_frames():
     straddle frames), with dropped frames held over: equal to the prepared stream."""
     sc = section6_scenario(0.5, 100.0)
     pixels = sc.pixels.at[jnp.array([7, 8, 23])].set(jnp.nan)
-    lazy, _, _ = fixed_camera_stream(
-        sc.ts, pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star,
-        dropouts=True, chunk=64,
-    )  # fmt: skip
+    camera = fixed_camera(
+        pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star, dropouts=True
+    )
+    lazy = velocity_stream(sc.ts, pixels, camera, dropouts=True, chunk=64)  # fmt: skip
     assert not bool(lazy.present[8]) and bool(lazy.present[9])
     eager = lazy.measured()
     a = run(EST, lazy, dt=1e-3, saveat=SaveAt(every=3))
@@ -125,10 +124,10 @@ def _temp_bytes(seconds, prepared):
     sc = section6_scenario(seconds, 1000.0)
 
     def f(pixels):
-        stream, _, _ = fixed_camera_stream(
-            sc.ts, pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star,
-            throw=False, chunk=128,
-        )  # fmt: skip
+        camera = fixed_camera(
+            pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star, throw=False
+        )
+        stream = velocity_stream(sc.ts, pixels, camera, throw=False, chunk=128)  # fmt: skip
         if prepared:
             stream = stream.measured()
         return run(EST, stream, saveat=SaveAt(outputs=False), throw=False).final_state

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from visjax.estimators import depth_from_feature_length, fixed_camera_stream
+from visjax.estimators import depth_from_feature_length, fixed_camera, velocity_stream
 from visjax.geometry import intrinsic_matrix, project
 from visjax.papers import chitrakaran
 
@@ -88,13 +88,14 @@ def test_the_stream_uses_the_known_length():
     sc = chitrakaran.section6_scenario(0.05, 1000.0)
     s = np.asarray(sc.s)
     L = float(np.linalg.norm(s[1] - s[2]))
-    stream, n_star, z1 = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, known_length=(1, 2, L)
+    camera = fixed_camera(
+        sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, known_length=(1, 2, L)
     )
+    stream = velocity_stream(sc.ts, sc.pixels, camera)
+    z1 = camera.z1_star
     np.testing.assert_allclose(z1, sc.z1_star, rtol=1e-9)
-    ref, _, _ = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
-    )
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star)
+    ref = velocity_stream(sc.ts, sc.pixels, camera)
     np.testing.assert_allclose(stream.measured().ys.J, ref.measured().ys.J, rtol=1e-8, atol=1e-10)
     assert jnp.shape(z1) == ()
 
@@ -105,17 +106,18 @@ def test_any_reference_image(no_jaxtyping):
     the measurements are those of the full stream from there on (no spike at the start)."""
     sc = chitrakaran.section6_scenario(0.2, 1000.0)
     kw = dict(n_star=sc.n_star, z1_star=sc.z1_star)
-    full, _, _ = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], **kw)
-    late, _, _ = fixed_camera_stream(
-        sc.ts[120:], sc.pixels[120:], sc.A, sc.R_star, sc.s[0], reference_pixels=sc.pixels[0], **kw
+    full = velocity_stream(
+        sc.ts, sc.pixels, fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], **kw)
     )
+    camera = fixed_camera(
+        sc.pixels[120:], sc.A, sc.R_star, sc.s[0], reference_pixels=sc.pixels[0], **kw
+    )
+    late = velocity_stream(sc.ts[120:], sc.pixels[120:], camera)
     late, full = late.measured().ys, full.measured().ys
     np.testing.assert_allclose(late.e, full.e[120:], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(late.J_inv, full.J_inv[120:], rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match="reference_pixels"):
-        fixed_camera_stream(
-            sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], reference_pixels=sc.pixels[0, :3], **kw
-        )
+        fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], reference_pixels=sc.pixels[0, :3], **kw)
 
 
 def test_velocity_in_the_object_frame():
@@ -124,9 +126,8 @@ def test_velocity_in_the_object_frame():
     from visjax.estimators import SaveAt, VelocityEstimator, run
 
     sc = chitrakaran.section6_scenario(0.3, 1000.0)
-    stream, _, _ = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
-    )
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star)
+    stream = velocity_stream(sc.ts, sc.pixels, camera)
     np.testing.assert_allclose(stream.measured().ys.R, sc.R, atol=1e-9)
     sol = run(
         VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63),
@@ -162,10 +163,11 @@ def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
     sc = chitrakaran.section6_scenario(2.0, 1000.0)
     keys = jax.vmap(jax.random.key)(jnp.arange(2))
     noisy = sc.pixels + 0.1 * jax.random.normal(keys[0], sc.pixels.shape)
-    args = (sc.ts, noisy, sc.A, sc.R_star, sc.s[0])
+    args = (noisy, sc.A, sc.R_star, sc.s[0])
     with pytest.raises(RuntimeError, match="R\\* s1 = d\\* w does not hold"):
-        fixed_camera_stream(*args)
-    stream, _, z1 = fixed_camera_stream(*args, throw=False)
+        fixed_camera(*args)
+    camera = fixed_camera(*args, throw=False)
+    stream, z1 = velocity_stream(sc.ts, noisy, camera, throw=False), camera.z1_star
     assert np.isnan(float(z1))
     assert stream.measurement(5).result == RESULTS.invalid_intrinsics
     est = VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63)
@@ -174,7 +176,9 @@ def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
 
     def one(key):
         pixels = sc.pixels + 0.1 * jax.random.normal(key, sc.pixels.shape)
-        s, _, z = fixed_camera_stream(sc.ts, pixels, sc.A, sc.R_star, sc.s[0], throw=False)
+        camera = fixed_camera(pixels, sc.A, sc.R_star, sc.s[0], throw=False)
+        s = velocity_stream(sc.ts, pixels, camera, throw=False)
+        z = camera.z1_star
         return run(est, s, saveat=SaveAt(outputs=False), throw=False).result._value, z
 
     codes, zs = jax.vmap(one)(keys)
@@ -182,5 +186,5 @@ def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
     assert np.all(np.asarray(codes) == RESULTS.nonfinite_measurement._value)
     # the paper's premise, a known length (features 1 and 3: the square's diagonal)
     length = float(jnp.linalg.norm(sc.s[0] - sc.s[2]))
-    _, _, z1 = fixed_camera_stream(*args, known_length=(0, 2, length))
+    z1 = fixed_camera(*args, known_length=(0, 2, length)).z1_star
     assert abs(float(z1) - float(sc.z1_star)) < 0.05

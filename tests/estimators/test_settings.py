@@ -14,12 +14,13 @@ import pytest
 
 from visjax import RESULTS
 from visjax.estimators import (
-    AdaptiveStructureEstimator,
+    MovingPointObserver,
     SaveAt,
-    UnknownInputObserver,
+    StaticPointsEstimator,
     VelocityEstimator,
-    fixed_camera_stream,
+    fixed_camera,
     run,
+    velocity_stream,
 )
 from visjax.papers import chitrakaran, jang, nath
 
@@ -28,9 +29,8 @@ NAN, INF = float("nan"), float("inf")
 
 def _velocity():
     sc = chitrakaran.section6_scenario(0.02, 1000.0)
-    stream, _, _ = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
-    )
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star)
+    stream = velocity_stream(sc.ts, sc.pixels, camera)
     return VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63), stream
 
 
@@ -108,8 +108,8 @@ SHAPE_CASES = {
 BUILD = {"velocity": _velocity, "uio": _uio, "adaptive": _adaptive}
 CLASSES = {
     "velocity": VelocityEstimator,
-    "uio": UnknownInputObserver,
-    "adaptive": AdaptiveStructureEstimator,
+    "uio": MovingPointObserver,
+    "adaptive": StaticPointsEstimator,
 }
 
 

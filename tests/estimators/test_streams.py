@@ -9,10 +9,11 @@ from visjax import RESULTS
 from visjax.estimators import (
     SaveAt,
     VelocityEstimator,
-    fixed_camera_stream,
-    moving_camera_stream,
-    platform_stream,
+    fixed_camera,
+    moving_point_stream,
     run,
+    static_points_stream,
+    velocity_stream,
 )
 from visjax.papers import chitrakaran, jang, nath
 
@@ -27,19 +28,18 @@ def _assert_stops_at(estimator, stream, k, dt=None):
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
-def test_fixed_camera_stream(bad):
+def test_velocity_stream(bad):
     sc = chitrakaran.section6_scenario(0.1, 1000.0)
     pixels = np.asarray(sc.pixels).copy()
     pixels[37, 2, 1] = bad
-    stream, _, _ = fixed_camera_stream(
-        sc.ts, pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star, throw=False
+    camera = fixed_camera(
+        pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star, throw=False
     )
+    stream = velocity_stream(sc.ts, pixels, camera, throw=False)
     est = VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63)
     _assert_stops_at(est, stream, 37)
     with pytest.raises(RuntimeError, match="not finite"):
-        fixed_camera_stream(
-            sc.ts, pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
-        )
+        velocity_stream(sc.ts, pixels, camera)
 
 
 def test_moving_camera_stream_at_the_camera_rate():
@@ -47,11 +47,11 @@ def test_moving_camera_stream_at_the_camera_rate():
     pixels = np.asarray(sc.frame_pixels).copy()
     velocities = np.asarray(sc.frame_velocities).copy()
     pixels[12, 0] = np.nan
-    stream = moving_camera_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
+    stream = moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
     _assert_stops_at(jang.observer("II.1"), stream, 12, dt=1e-3)
     velocities[12, 5] = np.nan
     pixels[12, 0] = 300.0
-    stream = moving_camera_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
+    stream = moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
     _assert_stops_at(jang.observer("II.1"), stream, 12, dt=1e-3)
 
 
@@ -59,11 +59,11 @@ def test_platform_stream():
     sc = nath.scenario(0.05)
     p_s = np.asarray(sc.p_s).copy()
     p_s[23, 1, 0] = np.inf  # a NaN pixel is a missing feature (masked), an infinite one is bad
-    stream = platform_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
+    stream = static_points_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
     _assert_stops_at(nath.initial_estimator(sc), stream, 23)
     x_b = np.asarray(sc.x_b).copy()
     x_b[31, 2] = np.inf
-    stream = platform_stream(sc.ts, sc.R_b, x_b, sc.p_s, sc.p_c, sc.omega_c)
+    stream = static_points_stream(sc.ts, sc.R_b, x_b, sc.p_s, sc.p_c, sc.omega_c)
     _assert_stops_at(nath.initial_estimator(sc), stream, 31)
 
 
@@ -76,7 +76,7 @@ def test_a_stream_built_inside_jit_keeps_its_times_for_dt():
     observer = jang.observer("II.1")
 
     def final_depth(noise):
-        stream = moving_camera_stream(frame_ts, pixels + noise, sc.frame_velocities, sc.Kc_observer)
+        stream = moving_point_stream(frame_ts, pixels + noise, sc.frame_velocities, sc.Kc_observer)
         sol = run(observer, stream, dt=1e-3, saveat=SaveAt(outputs=False), throw=False)
         return sol.final_state.z[2], sol.result._value
 
@@ -86,7 +86,7 @@ def test_a_stream_built_inside_jit_keeps_its_times_for_dt():
     assert np.all(codes == RESULTS.successful._value)
     outside = run(
         observer,
-        moving_camera_stream(frame_ts, pixels, sc.frame_velocities, sc.Kc_observer),
+        moving_point_stream(frame_ts, pixels, sc.frame_velocities, sc.Kc_observer),
         dt=1e-3,
         saveat=SaveAt(outputs=False),
     )

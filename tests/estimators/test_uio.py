@@ -9,8 +9,8 @@ import pytest
 from visjax import RESULTS
 from visjax.estimators import (
     AbstractEstimator,
+    MovingPointObserver,
     SaveAt,
-    UnknownInputObserver,
     rank_condition,
     run,
 )
@@ -51,7 +51,7 @@ def test_reduction_oracle_without_unknown_input():
     s = SETS["I.1"]
     sc = moving_camera_scenario("I.1", 3.0)
     K = jnp.array(s.K).at[2].set(jnp.array([-0.5, -1.0]))
-    uio = UnknownInputObserver(
+    uio = MovingPointObserver(
         A=jnp.array(s.A, float),
         D=jnp.zeros((3, 1)),
         K=K,
@@ -111,7 +111,7 @@ def test_vmap_over_seeds_and_sets_and_grad():
 
 def test_observer_shape_errors():
     with pytest.raises(ValueError, match=r"`K` must have shape \(3, 2\)"):
-        UnknownInputObserver(
+        MovingPointObserver(
             A=jnp.zeros((3, 3)),
             D=jnp.zeros((3, 1)),
             K=jnp.zeros((2, 2)),
@@ -167,7 +167,7 @@ def test_the_rank_condition_is_checked_by_the_observer_and_the_design():
     failing = [message for ok, message in bad.checks() if not bool(ok)]
     assert any("rank condition (3.20)" in message for message in failing)
     stream = moving_camera_scenario("I.1", 0.05).held_stream()
-    with pytest.raises(ValueError, match="UnknownInputObserver"):
+    with pytest.raises(ValueError, match="MovingPointObserver"):
         run(bad, stream)
     with pytest.raises(ValueError, match=r"rank condition \(3.20\)"):
         design_uio(np.zeros((3, 3)), C, np.array(s.D, float)[:, None], 1.0)
@@ -180,11 +180,11 @@ def test_the_rank_condition_is_checked_by_the_observer_and_the_design():
 def test_D_as_a_vector_and_the_new_fields_defaults():
     """`D` given as (3,) is the (3, 1) column; `D2`, `A_u`, `K_u`, `P` default to zero (the
     thesis' observer, unchanged); wrong shapes of the new fields are refused by name."""
-    from visjax.estimators import moving_camera_stream
+    from visjax.estimators import moving_point_stream
 
     s = SETS["II.1"]
     col = observer_for("II.1")
-    vec = UnknownInputObserver(A=s.A, D=np.array(s.D, float), K=s.K, Y=s.Y, x3_guess=0.01)
+    vec = MovingPointObserver(A=s.A, D=np.array(s.D, float), K=s.K, Y=s.Y, x3_guess=0.01)
     assert vec.D.shape == (3, 1) and vec.D2.shape == (3, 1)
     assert not bool(vec.time_varying)
     assert np.all(np.asarray(vec.disturbance_input()) == 0)
@@ -195,11 +195,11 @@ def test_D_as_a_vector_and_the_new_fields_defaults():
     fields = dict(A=s.A, D=s.D, K=s.K, Y=s.Y, x3_guess=0.01)
     for name, shape in (("D2", (2,)), ("A_u", (3, 3)), ("K_u", (6, 2, 3)), ("P", (3,))):
         with pytest.raises(ValueError, match=f"`{name}` must have shape"):
-            UnknownInputObserver(**fields, **{name: np.zeros(shape)})
+            MovingPointObserver(**fields, **{name: np.zeros(shape)})
     # a dropped first frame has nothing to hold: the run still stops at sample 0
     pixels = np.asarray(sc.frame_pixels).copy()
     pixels[0, 1] = np.nan
-    stream = moving_camera_stream(
+    stream = moving_point_stream(
         sc.frame_ts, pixels, sc.frame_velocities, sc.Kc_observer, dropped="hold"
     )
     out = run(col, stream, dt=1e-3, saveat=SaveAt(outputs=False), throw=False)

@@ -17,9 +17,9 @@ from visjax.design import design_uio
 from visjax.estimators import (
     THESIS_A_U,
     MovingCameraMeasurement,
+    MovingPointObserver,
     SaveAt,
-    UnknownInputObserver,
-    moving_camera_stream,
+    moving_point_stream,
     run,
 )
 from visjax.sim import Trajectory, moving_point_scene
@@ -82,7 +82,7 @@ def test_dropped_frames(sideways):
     ts, u = truth.ts[frames], truth.camera_velocity[frames]
     out = run(
         obs,
-        moving_camera_stream(ts, pixels, u, S.K_C),
+        moving_point_stream(ts, pixels, u, S.K_C),
         dt=1e-3,
         saveat=SaveAt(outputs=False),
         throw=False,
@@ -93,16 +93,16 @@ def test_dropped_frames(sideways):
     # pixels moving at a constant image velocity (here: synthetic, two frames in a row
     # dropped); the velocities are never touched
     k = int(np.flatnonzero(drop)[0])
-    held = moving_camera_stream(ts, pixels, u, S.K_C, dropped="hold")
+    held = moving_point_stream(ts, pixels, u, S.K_C, dropped="hold")
     np.testing.assert_array_equal(held.ys.y[k], held.ys.y[k - 1])
     np.testing.assert_array_equal(held.ys.u, u)
     line = 100.0 + jnp.stack([3.0 * ts, -2.0 * ts], axis=1) * 50.0
     gaps = line.at[jnp.array([4, 5, 9])].set(jnp.nan)
-    ext = moving_camera_stream(ts, gaps, u, S.K_C, dropped="extrapolate")
-    exact = moving_camera_stream(ts, line, u, S.K_C)
+    ext = moving_point_stream(ts, gaps, u, S.K_C, dropped="extrapolate")
+    exact = moving_point_stream(ts, line, u, S.K_C)
     np.testing.assert_allclose(ext.ys.y, exact.ys.y, rtol=0, atol=1e-13)
     with pytest.raises(ValueError, match="`dropped` must be"):
-        moving_camera_stream(ts, pixels, u, S.K_C, dropped="interpolate")
+        moving_point_stream(ts, pixels, u, S.K_C, dropped="interpolate")
 
 
 def _constant_velocity_scene(target_velocity, duration=3.0):
@@ -119,7 +119,7 @@ def _constant_velocity_scene(target_velocity, duration=3.0):
     vp = jnp.asarray(target_velocity)
     p = jnp.array([0.0, 0.0, 2.5])[None, :] + ts[:, None] * vp[None, :]
     sc = moving_point_scene(cam, p, jnp.broadcast_to(vp, p.shape), S.K_C)
-    stream = moving_camera_stream(sc.ts, sc.pixels, sc.camera_velocity, S.K_C, truth=sc.x)
+    stream = moving_point_stream(sc.ts, sc.pixels, sc.camera_velocity, S.K_C, truth=sc.x)
     return sc, stream
 
 
@@ -133,7 +133,7 @@ def test_uub_split_error_is_the_predicted_bias_and_within_the_bound():
     A = np.einsum("j,jab->ab", u, THESIS_A_U)
     D1, D2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
     d = design_uio(A, C, D1, 1e-3, uub=True, alpha=1.0)
-    obs = UnknownInputObserver(A=A, D=D1, D2=D2, K=d.K, Y=d.Y, x3_guess=0.3)
+    obs = MovingPointObserver(A=A, D=D1, D2=D2, K=d.K, Y=d.Y, x3_guess=0.3)
     errors = []
     for vpy in (0.01, 0.02):
         sc, stream = _constant_velocity_scene([0.05, vpy, 0.0])
@@ -156,8 +156,8 @@ def test_time_varying_A_at_constant_velocity_equals_the_fixed_observer():
     u = np.asarray(sc.camera_velocity[0])
     A = np.einsum("j,jab->ab", u, THESIS_A_U)
     d = design_uio(A, C, [1.0, 0.0, 0.0], 1e-3, alpha=0.5)
-    fixed = UnknownInputObserver(A=A, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3)
-    varying = UnknownInputObserver(
+    fixed = MovingPointObserver(A=A, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3)
+    varying = MovingPointObserver(
         A=np.zeros((3, 3)), A_u=THESIS_A_U, P=d.P, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3
     )
     a = run(fixed, stream, saveat=SaveAt(every=50)).outputs.x_hat
@@ -204,7 +204,7 @@ def test_jit_vmap_grad_of_the_new_options(sideways):
 
     def final_error(noise, o):
         p = jnp.where(jnp.asarray(drop)[:, None], jnp.nan, pixels + noise)
-        stream = moving_camera_stream(ts, p, u, S.K_C, dropped="extrapolate")
+        stream = moving_point_stream(ts, p, u, S.K_C, dropped="extrapolate")
         sol = run(o, stream, dt=1e-3, saveat=SaveAt(outputs=False), throw=False)
         x3 = sol.final_state.z[2] - (o._matrices()[0] @ stream.ys.y[-1])[2]
         return x3 - x_true[-1, 2], sol.result._value

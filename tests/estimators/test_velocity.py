@@ -10,17 +10,19 @@ from tests.helpers import without_jaxtyping
 from tests.reference_velocity import numpy_velocity_estimator
 from visjax import RESULTS
 from visjax.estimators import (
+    FixedCamera,
     SaveAt,
     VelocityEstimator,
     VelocityState,
     WindowRMS,
     depth_from_known_length,
     diagonal_intersection,
-    fixed_camera_stream,
+    fixed_camera,
     paper_eq56_matrix,
     plane_normal_from_frames,
     run,
     velocity_measurements,
+    velocity_stream,
 )
 from visjax.geometry import euclidean_reconstruction, pixel_to_normalized, project, so3_exp
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
@@ -41,10 +43,8 @@ def short():
 
 
 def _stream(sc):
-    stream, _, _ = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], truth=sc.velocity
-    )
-    return stream
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    return velocity_stream(sc.ts, sc.pixels, camera, truth=sc.velocity)
 
 
 def test_e_dot_equals_J_v():
@@ -52,6 +52,7 @@ def test_e_dot_equals_J_v():
     sc = section6_scenario(0.01, 1000.0)  # only the constants are used
     A, R_star, s, x_f_star = sc.A, sc.R_star, sc.s, sc.x_f_star
     p_ref = project(x_f_star[None, :] + s @ R_star.T, A)
+    camera = FixedCamera(p_ref, A, R_star, s[0], sc.n_star, sc.z1_star)
     rng = np.random.default_rng(0)
     poses = [(np.zeros(3), np.zeros(3))]  # the reference pose itself (H = I)
     poses += [(0.3 * rng.normal(size=3), 0.1 * rng.normal(size=3)) for _ in range(6)]
@@ -65,11 +66,9 @@ def test_e_dot_equals_J_v():
             R = so3_exp(t * v[3:]) @ R0  # [omega]x = dR/dt R^T = [v[3:]]x
             x = x0 + t * v[:3]
             p = project(x[None, :] + s @ R.T, A)
-            return velocity_measurements(p_ref, p, A, R_star, s[0], sc.z1_star, sc.n_star).e
+            return velocity_measurements(camera, p).e
 
-        y = velocity_measurements(
-            p_ref, project(x0[None, :] + s @ R0.T, A), A, R_star, s[0], sc.z1_star, sc.n_star
-        )
+        y = velocity_measurements(camera, project(x0[None, :] + s @ R0.T, A))
         _, e_dot = jax.jvp(e_of_t, (jnp.zeros(()),), (jnp.ones(()),))
         return y.J @ v, e_dot, y.J_inv @ y.J
 
@@ -131,7 +130,9 @@ def test_settles_from_a_wrong_initial_estimate(sc1k):
 def test_agrees_with_numpy_reference():
     """The per-step NumPy transcription of the benchmark and visjax, first 0.5 s."""
     sc = section6_scenario(0.5, 1000.0)
-    stream, n_star, z1 = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0])
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    stream = velocity_stream(sc.ts, sc.pixels, camera)
+    n_star, z1 = camera.n_star, camera.z1_star
     sol = run(VelocityEstimator(K=K, rho=RHO), stream)
     ref = numpy_velocity_estimator(
         np.asarray(sc.pixels),
@@ -168,16 +169,8 @@ def test_vmap_over_gains_and_noise_and_grad(short):
 
     def noisy(key):
         p = sc.pixels + 0.5 * jax.random.normal(key, sc.pixels.shape)
-        s, _, _ = fixed_camera_stream(
-            sc.ts,
-            p,
-            sc.A,
-            sc.R_star,
-            sc.s[0],
-            n_star=sc.n_star,
-            z1_star=sc.z1_star,
-            truth=sc.velocity,
-        )
+        camera = fixed_camera(p, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star)
+        s = velocity_stream(sc.ts, p, camera, truth=sc.velocity)
         return rms(K, s)
 
     by_seed = jax.jit(jax.vmap(noisy))(keys)
@@ -198,14 +191,13 @@ def test_gain_and_input_errors(short):
     with pytest.raises(ValueError, match="`K` must be positive definite"):
         run(VelocityEstimator(K=K.at[2].set(-1.0), rho=RHO), stream)
     bad = sc.pixels[3].at[1, 0].set(jnp.nan)
+    camera = FixedCamera(sc.pixels[0], sc.A, sc.R_star, sc.s[0], sc.n_star, sc.z1_star)
     with pytest.raises(RuntimeError, match="not finite"):
-        velocity_measurements(sc.pixels[0], bad, sc.A, sc.R_star, sc.s[0], sc.z1_star, sc.n_star)
-    m = velocity_measurements(
-        sc.pixels[0], bad, sc.A, sc.R_star, sc.s[0], sc.z1_star, sc.n_star, throw=False
-    )
+        velocity_measurements(camera, bad)
+    m = velocity_measurements(camera, bad, throw=False)
     assert m.result == RESULTS.nonfinite_pixels and np.all(np.isnan(m.e))
     with without_jaxtyping(), pytest.raises(ValueError, match="one time per frame"):
-        fixed_camera_stream(sc.ts[:3], sc.pixels, sc.A, sc.R_star, sc.s[0])
+        velocity_stream(sc.ts[:3], sc.pixels, camera)
 
 
 @pytest.mark.slow
@@ -216,9 +208,8 @@ def test_unstable_steps_are_refused(short):
     est = VelocityEstimator(K=K, rho=RHO)
     assert 6e-3 < float(est.max_stable_dt()) < 7e-3  # 2 / 300 for eq. (63)
     sc = section6_scenario(1.0, 30.0)
-    stream30, _, _ = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star
-    )
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star)
+    stream30 = velocity_stream(sc.ts, sc.pixels, camera)
     with pytest.raises(ValueError, match="exceeds the Euler stability bound"):
         run(est, stream30)
     _, stream = short

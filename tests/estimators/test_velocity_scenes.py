@@ -9,12 +9,14 @@ import pytest
 
 from visjax import RESULTS
 from visjax.estimators import (
+    FixedCamera,
     SaveAt,
     VelocityEstimator,
     WindowRMS,
-    fixed_camera_stream,
+    fixed_camera,
     run,
     velocity_measurements,
+    velocity_stream,
 )
 from visjax.geometry import euclidean_reconstruction, so3_exp
 from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63
@@ -60,16 +62,9 @@ def runs():
     for dropout in (0.0, 0.05):
         ts, pixels, seen, rig, body, s = _scene(dropout)
         L = jnp.linalg.norm(s[1] - s[3])
-        stream, n_star, z1 = fixed_camera_stream(
-            ts,
-            pixels,
-            rig.A,
-            body.R[0],
-            s[0],
-            known_length=(1, 3, L),
-            dropouts=True,
-            truth=body.twist,
-        )
+        camera = fixed_camera(pixels, rig.A, body.R[0], s[0], known_length=(1, 3, L), dropouts=True)
+        stream = velocity_stream(ts, pixels, camera, dropouts=True, truth=body.twist)
+        z1 = camera.z1_star
         sol = run(
             VelocityEstimator(K=K_EQ63, rho=RHO_EQ63),
             stream,
@@ -122,7 +117,7 @@ def test_masked_homography_equals_the_homography_of_the_seen_features():
     n_star = full.n_star
     measure = jax.jit(
         lambda p, v: velocity_measurements(
-            pixels[0], p, rig.A, body.R[0], s[0], 1.5, n_star, visible=v
+            FixedCamera(pixels[0], rig.A, body.R[0], s[0], n_star, 1.5), p, visible=v
         )
     )
     m = measure(p_cur, vis1)
@@ -133,19 +128,13 @@ def test_masked_homography_equals_the_homography_of_the_seen_features():
 def test_too_few_features_drop_the_frame_and_the_first_must_be_seen(no_jaxtyping):
     ts, pixels, seen, rig, body, s = _scene(0.0)
     bad = pixels.at[50, :3].set(jnp.nan)  # 3 of 6 left: frame 50 cannot be measured
-    stream, n_star, z1 = fixed_camera_stream(
-        ts, bad, rig.A, body.R[0], s[0], known_length=(1, 3, 0.2), dropouts=True, truth=body.twist
-    )
+    camera = fixed_camera(bad, rig.A, body.R[0], s[0], known_length=(1, 3, 0.2), dropouts=True)
+    stream = velocity_stream(ts, bad, camera, dropouts=True, truth=body.twist)
     assert not bool(stream.present[50]) and bool(stream.present[51])
     with pytest.raises(ValueError, match="reference"):
-        fixed_camera_stream(
-            ts,
-            pixels.at[0, 2].set(jnp.nan),
-            rig.A,
-            body.R[0],
-            s[0],
-            known_length=(1, 3, 0.2),
+        fixed_camera(
+            pixels.at[0, 2].set(jnp.nan), rig.A, body.R[0], s[0], known_length=(1, 3, 0.2),
             dropouts=True,
-        )
+        )  # fmt: skip
     with pytest.raises(ValueError, match="visible"):
         euclidean_reconstruction(pixels[0], pixels[1], rig.A, visible=jnp.ones(5, bool))

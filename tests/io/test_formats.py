@@ -6,8 +6,8 @@ import pytest
 
 from visjax.io import (
     DataFormatError,
-    EuclideanData,
-    StructureData,
+    MovingPointData,
+    StaticPointsData,
     VelocityData,
     load_tracks_csv,
     save_tracks_csv,
@@ -45,7 +45,7 @@ def _velocity(N=20, n=6):
 
 
 def _structure(N=20, M=70):
-    return StructureData(
+    return MovingPointData(
         t=np.arange(N) / 50.0,
         pixels=RNG.uniform(0, 600, (N, 2)),
         A=np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]]),
@@ -57,7 +57,7 @@ def _structure(N=20, M=70):
 
 
 def _euclidean(N=20, n=8, k=5):
-    return EuclideanData(
+    return StaticPointsData(
         t=np.arange(N) * 1e-3,
         pixels=RNG.uniform(0, 600, (N, n, 2)),
         platform_R=_rotations(N),
@@ -72,8 +72,8 @@ def _euclidean(N=20, n=8, k=5):
 
 KEYS = {
     VelocityData: {"t", "pixels", "A", "R_star", "s1", "known_length", "velocity"},
-    StructureData: {"t", "pixels", "A", "camera_t", "camera_velocity", "D", "position"},
-    EuclideanData: {
+    MovingPointData: {"t", "pixels", "A", "camera_t", "camera_velocity", "D", "position"},
+    StaticPointsData: {
         "t",
         "pixels",
         "platform_R",

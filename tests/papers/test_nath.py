@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from visjax import RESULTS
-from visjax.estimators import SaveAt, platform_measurements, platform_stream, run
+from visjax.estimators import SaveAt, platform_measurements, run, static_points_stream
 from visjax.papers.nath import (
     euclidean_experiment,
     final_errors,
@@ -65,7 +65,7 @@ def test_vmap_over_noise_seeds_and_grad():
 
     def final_error(key, gamma_s0):
         p_s = sc.p_s + 0.5 * jax.random.normal(key, sc.p_s.shape)
-        st = platform_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
+        st = static_points_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
         est = eqx.tree_at(lambda e: e.gamma_s0, initial_estimator(sc), gamma_s0)
         theta_s = run(est, st, saveat=SaveAt(outputs=False)).final_state.theta_s
         return jnp.sum((theta_s[:, :3] / theta_s[:, 3:] - sc.omega_s) ** 2)

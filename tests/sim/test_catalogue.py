@@ -115,8 +115,8 @@ def test_records_are_data_files(plate):
     build."""
     records = [
         (io.VelocityData, sim.sinusoidal_plate_record(T, noise_px=0.0, dropout=0.0)),
-        (io.StructureData, sim.sideways_camera_record(2 * T, noise_px=0.0)),
-        (io.EuclideanData, sim.tilted_platform_record(2 * T, noise_px=0.0, dropout=0.0)),
+        (io.MovingPointData, sim.sideways_camera_record(2 * T, noise_px=0.0)),
+        (io.StaticPointsData, sim.tilted_platform_record(2 * T, noise_px=0.0, dropout=0.0)),
     ]
     for cls, rec in records:
         fields = {f.name: f for f in dataclasses.fields(cls)}

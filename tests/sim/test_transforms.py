@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from visjax.estimators import moving_camera_stream
+from visjax.estimators import moving_point_stream
 from visjax.sim import add_pixel_noise, fixed_camera_pixels, integrate_twist, platform_camera_pixels
 
 A = jnp.array([[800.0, 0.0, 320.0], [0.0, 790.0, 240.0], [0.0, 0.0, 1.0]])
@@ -48,7 +48,7 @@ def test_platform_camera_pixels_and_noise_jit_vmap_grad():
 def test_moving_camera_stream_jit_vmap_grad():
     pixels = jnp.stack([320.0 + 10.0 * TS, 240.0 - 5.0 * TS], axis=1)
     u = jnp.zeros((5, 6))
-    f = jax.jit(lambda p: jnp.sum(moving_camera_stream(TS, p, u, A).ys.y))
+    f = jax.jit(lambda p: jnp.sum(moving_point_stream(TS, p, u, A).ys.y))
     np.testing.assert_allclose(jax.grad(f)(pixels), np.tile([1 / 800.0, 1 / 790.0], (5, 1)))
     batched = jax.vmap(f)(jnp.stack([pixels, pixels + 1.0]))
     np.testing.assert_allclose(batched[1] - batched[0], 5 * (1 / 800.0 + 1 / 790.0), rtol=1e-10)

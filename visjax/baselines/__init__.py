@@ -6,7 +6,7 @@ from ._bundle import (
     BundleDiagnostics as BundleDiagnostics,
     bundle_adjustment as bundle_adjustment,
     bundle_adjustment_residuals as bundle_adjustment_residuals,
-    euclidean_ekf as euclidean_ekf,
+    static_points_ekf as static_points_ekf,
 )
 from ._ekf import (
     AbstractEKFModel as AbstractEKFModel,
@@ -16,9 +16,9 @@ from ._ekf import (
 from ._opencv import opencv_reconstruction as opencv_reconstruction
 from ._point_fit import (
     camera_poses as camera_poses,
+    moving_point_ekf as moving_point_ekf,
     triangulate_point as triangulate_point,
     triangulation_residuals as triangulation_residuals,
-    uio_ekf as uio_ekf,
 )
 from ._pose_fit import (
     FramePoses as FramePoses,

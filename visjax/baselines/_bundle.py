@@ -24,7 +24,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._results import RESULTS, all_finite, first_failure, raise_or_keep
 from .._util import as_float, check_shape
-from ..estimators import AdaptiveOutput, AdaptiveStructureEstimator, Solution, Stream
+from ..estimators import AdaptiveOutput, Solution, StaticPointsEstimator, Stream
 from ..geometry import so3_exp, so3_log
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
 
@@ -95,9 +95,9 @@ def _initial(estimator, y0):
 
 def _check(estimator, stream, omega_c):
     """The arguments shared by the baselines, checked before tracing."""
-    if not isinstance(estimator, AdaptiveStructureEstimator):
+    if not isinstance(estimator, StaticPointsEstimator):
         raise ValueError(
-            f"`estimator` must be an AdaptiveStructureEstimator; got {type(estimator).__name__}."
+            f"`estimator` must be an StaticPointsEstimator; got {type(estimator).__name__}."
         )
     if not isinstance(stream, Stream):
         raise ValueError(f"`stream` must be a visjax Stream; got {type(stream).__name__}.")
@@ -128,7 +128,7 @@ def _fit(y_init, args, solver, max_steps):
 
 
 def bundle_adjustment(
-    estimator: AdaptiveStructureEstimator,
+    estimator: StaticPointsEstimator,
     stream: Stream,
     omega_c: Float[ArrayLike, "m 3"],
     *,
@@ -140,17 +140,17 @@ def bundle_adjustment(
     throw: bool = True,
 ) -> Solution:
     """Bundle adjustment of the camera and the unknown features, from the same stream and
-    the same initial guesses as `AdaptiveStructureEstimator` (module docstring).
+    the same initial guesses as `StaticPointsEstimator` (module docstring).
 
     **Arguments:**
 
     - `estimator`: the adaptive estimator whose initial estimate starts the fit (its
         output at the first sample: intrinsics, mounting and features, e.g. from
-        `AdaptiveStructureEstimator.from_nominal`). Its gains are not used.
-    - `stream`: the estimator's stream (`platform_stream`): platform poses, pixels of the
+        `StaticPointsEstimator.from_nominal`). Its gains are not used.
+    - `stream`: the estimator's stream (`static_points_stream`): platform poses, pixels of the
         unknown and known features, visibility.
     - `omega_c` (m, 3): the known features' world positions (as given to
-        `platform_stream`).
+        `static_points_stream`).
     - `window`: `None` (default): one fit over all frames; the estimate is the same at
         every sample time (it uses the future: an offline answer). An int `W`: the online
         variant, a fit at every `every`-th sample over the last `W` frames up to it
@@ -326,8 +326,8 @@ class _CameraFeaturesModel(AbstractEKFModel):
         return jnp.all(z > 0.0)
 
 
-def euclidean_ekf(
-    estimator: AdaptiveStructureEstimator,
+def static_points_ekf(
+    estimator: StaticPointsEstimator,
     stream: Stream,
     omega_c: Float[ArrayLike, "m 3"],
     *,

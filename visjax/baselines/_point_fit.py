@@ -99,7 +99,7 @@ def triangulate_point(
     """Triangulate the point at every frame from the last `window` frames (fewer at the
     start) and the camera velocities between them (module docstring).
 
-    **Arguments:** `stream` the observer's stream (`moving_camera_stream`: normalised
+    **Arguments:** `stream` the observer's stream (`moving_point_stream`: normalised
     coordinates `y` and camera velocities `u`; a NaN frame is skipped); `window` the frames
     per fit (static); `order` the degree of the point's trajectory over the window (0: a
     static point); `rcond` the smallest accepted ratio of the smallest to the largest
@@ -240,7 +240,7 @@ class _InverseDepth(AbstractEKFModel):
         return x[2] > 0.0
 
 
-def uio_ekf(
+def moving_point_ekf(
     stream: Stream,
     *,
     r_norm: float,

@@ -30,7 +30,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, all_finite, raise_or_keep
 from .._util import as_float, check_shape
-from ..estimators import Solution, VelocityOutput
+from ..estimators import FixedCamera, Solution, VelocityOutput
 from ..geometry import euclidean_reconstruction, so3_exp, so3_log
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
 
@@ -46,9 +46,11 @@ class FramePoses(eqx.Module):
     result: RESULTS
 
 
-def object_features(p_ref, A, R_star, s1, n_star, z1_star):
-    """The features in the object frame, (n, 3), and $x_f^*$ from the reference image
-    (module docstring; Chitrakaran et al., eqs. (3)-(5))."""
+def object_features(camera: FixedCamera):
+    """The features in the object frame, (n, 3), and $x_f^*$ from the fixed camera's
+    reference image and constants (module docstring; Chitrakaran et al., eqs. (3)-(5))."""
+    p_ref, A, R_star, s1 = camera.p_ref, camera.A, camera.R_star, camera.s1
+    n_star, z1_star = camera.n_star, camera.z1_star
     q = jnp.linalg.solve(A, jnp.concatenate([p_ref, jnp.ones_like(p_ref[:, :1])], 1).T).T
     d_star = z1_star * (n_star @ q[0])
     m_star = d_star * q / (q @ n_star)[:, None]
@@ -62,30 +64,24 @@ def _pixels(A, R, x_f, s):
     return q[:, :2] / q[:, 2:]
 
 
-def _check(pixels, A, R_star, s1, n_star, z1_star, reference_pixels):
+def _check(pixels, camera):
     pixels = as_float(pixels)
     if pixels.ndim != 3 or pixels.shape[-1] != 2 or pixels.shape[1] < 4:
         raise ValueError(f"`pixels` must have shape (N, n >= 4, 2); got {tuple(pixels.shape)}.")
-    A, R_star, s1, n_star, z1_star = (as_float(x) for x in (A, R_star, s1, n_star, z1_star))
-    check_shape(A, (3, 3), "A")
-    check_shape(R_star, (3, 3), "R_star")
-    check_shape(s1, (3,), "s1")
-    check_shape(n_star, (3,), "n_star")
-    check_shape(z1_star, (), "z1_star")
-    p_ref = pixels[0] if reference_pixels is None else as_float(reference_pixels)
-    check_shape(p_ref, pixels.shape[1:], "reference_pixels")
-    return pixels, p_ref, A, R_star, s1, n_star, z1_star
+    if not isinstance(camera, FixedCamera):
+        raise TypeError(
+            f"`camera` must be a FixedCamera (see `estimators.fixed_camera`); "
+            f"got {type(camera).__name__}."
+        )
+    check_shape(camera.p_ref, pixels.shape[1:], "camera.p_ref")
+    c = camera
+    return pixels, c.p_ref, c.A, c.R_star, c.s1, c.n_star, c.z1_star
 
 
 def frame_poses(
     pixels: Float[ArrayLike, "N n 2"],
-    A: Float[ArrayLike, "3 3"],
-    R_star: Float[ArrayLike, "3 3"],
-    s1: Float[ArrayLike, "3"],
-    n_star: Float[ArrayLike, "3"],
-    z1_star: Float[ArrayLike, ""],
+    camera: FixedCamera,
     *,
-    reference_pixels: Float[ArrayLike, "n 2"] | None = None,
     refine: bool = True,
     max_steps: int = 1000,
 ) -> FramePoses:
@@ -94,10 +90,8 @@ def frame_poses(
     error in pixels (rotation as a rotation vector about the homography's estimate); a NaN
     pixel is a feature not seen in that frame (at least four must be). Vmapped over
     frames; a frame that cannot be measured has its `result` and NaN pose."""
-    pixels, p_ref, A, R_star, s1, n_star, z1_star = _check(
-        pixels, A, R_star, s1, n_star, z1_star, reference_pixels
-    )
-    s, x_f_star = object_features(p_ref, A, R_star, s1, n_star, z1_star)
+    pixels, p_ref, A, R_star, s1, n_star, z1_star = _check(pixels, camera)
+    s, x_f_star = object_features(camera)
     d_star = z1_star * (n_star @ jnp.linalg.solve(A, jnp.append(p_ref[0], 1.0)))
     solver = optx.GaussNewton(rtol=1e-9, atol=1e-9)
 
@@ -235,17 +229,12 @@ def _velocity_outputs(poses, ts, half_width, degree, causal):
 def velocity_smoother(
     ts: Float[ArrayLike, " N"],
     pixels: Float[ArrayLike, "N n 2"],
-    A: Float[ArrayLike, "3 3"],
-    R_star: Float[ArrayLike, "3 3"],
-    s1: Float[ArrayLike, "3"],
-    n_star: Float[ArrayLike, "3"],
-    z1_star: Float[ArrayLike, ""],
+    camera: FixedCamera,
     *,
     bandwidth_hz: float,
     causal: bool = False,
     degree: int = 2,
     sample_interval: float | None = None,
-    reference_pixels: Float[ArrayLike, "n 2"] | None = None,
     poses: FramePoses | None = None,
     throw: bool = True,
 ) -> Solution:
@@ -284,9 +273,7 @@ def velocity_smoother(
     dt = float(sample_interval)
     M = half_width_for_bandwidth(bandwidth_hz, dt, degree=degree, causal=causal)
     if poses is None:
-        poses = frame_poses(
-            pixels, A, R_star, s1, n_star, z1_star, reference_pixels=reference_pixels
-        )
+        poses = frame_poses(pixels, camera)
     outputs = _velocity_outputs(poses, ts, M, degree, causal)
     good = jnp.all(jnp.isfinite(outputs.v_hat), axis=1)
     first = jnp.argmin(good)
@@ -354,17 +341,12 @@ class _ConstantAcceleration(AbstractEKFModel):
 def velocity_ekf(
     ts: Float[ArrayLike, " N"],
     pixels: Float[ArrayLike, "N n 2"],
-    A: Float[ArrayLike, "3 3"],
-    R_star: Float[ArrayLike, "3 3"],
-    s1: Float[ArrayLike, "3"],
-    n_star: Float[ArrayLike, "3"],
-    z1_star: Float[ArrayLike, ""],
+    camera: FixedCamera,
     *,
     r_px: float = 0.5,
     max_jerk: float = 1.0,
     max_angular_jerk: float = 1.0,
     sigma_velocity: float = 1.0,
-    reference_pixels: Float[ArrayLike, "n 2"] | None = None,
     throw: bool = True,
 ) -> Solution:
     """An extended Kalman filter of the object's pose and twist with a constant-acceleration
@@ -388,13 +370,11 @@ def velocity_ekf(
     `diverged` for a pose behind the camera, `nonfinite_state`), `failed_sample`, and the
     covariances as `diagnostics`.
     """
-    pixels, p_ref, A, R_star, s1, n_star, z1_star = _check(
-        pixels, A, R_star, s1, n_star, z1_star, reference_pixels
-    )
+    pixels, p_ref, A, R_star, s1, n_star, z1_star = _check(pixels, camera)
     ts = as_float(ts)
     check_shape(ts, (pixels.shape[0],), "ts")
-    s, _ = object_features(p_ref, A, R_star, s1, n_star, z1_star)
-    first = frame_poses(pixels[:1], A, R_star, s1, n_star, z1_star, reference_pixels=p_ref)
+    s, _ = object_features(camera)
+    first = frame_poses(pixels[:1], camera)
     R0 = jnp.where(jnp.isfinite(first.R[0]), first.R[0], jnp.eye(3, dtype=A.dtype))
     x0 = jnp.concatenate(
         [jnp.where(jnp.isfinite(first.x_f[0]), first.x_f[0], 0.0), jnp.zeros(15, A.dtype)]

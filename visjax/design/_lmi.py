@@ -50,7 +50,7 @@ class UIODesign:
     \\sum_j u_j A_{u,j}$ and $K(u) = K + \\sum_j u_j K_{u,j}$ (zeros for a fixed design);
     `N` is then $N(0)$, and `persistent` says which vertex inequality was used.
     `observer_fields()` gives the keyword arguments of
-    `UnknownInputObserver` (`K`, `Y`, `A_u`, `K_u`, `P`)."""
+    `MovingPointObserver` (`K`, `Y`, `A_u`, `K_u`, `P`)."""
 
     P: np.ndarray
     K: np.ndarray
@@ -69,7 +69,7 @@ class UIODesign:
 
     def observer_fields(self) -> dict:
         """`K`, `Y` (and for a velocity range `A_u`, `K_u`, `P`) as keyword arguments of
-        `visjax.estimators.UnknownInputObserver`."""
+        `visjax.estimators.MovingPointObserver`."""
         fields = {"K": self.K, "Y": self.Y}
         if self.A_u is not None:
             fields.update(A_u=self.A_u, K_u=self.K_u, P=self.P)
@@ -320,7 +320,7 @@ def design_uio(
       velocity, the cross terms of $V$ cancelling) large, and the depth converge faster
       under the same excitation (`convergence_rate`, `design_uio_for_motion`).
 
-    **Returns:** a `UIODesign` (`observer_fields()` for `UnknownInputObserver`). Raises
+    **Returns:** a `UIODesign` (`observer_fields()` for `MovingPointObserver`). Raises
     `LMIInfeasibleError` (a `ValueError`) if the LMI is infeasible, with the largest
     feasible bound in the message for the fixed design.
     """

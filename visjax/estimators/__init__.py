@@ -4,11 +4,11 @@ from ._adaptive_ls import (
     AdaptiveDiagnostics as AdaptiveDiagnostics,
     AdaptiveOutput as AdaptiveOutput,
     AdaptiveState as AdaptiveState,
-    AdaptiveStructureEstimator as AdaptiveStructureEstimator,
     PlatformMeasurement as PlatformMeasurement,
+    StaticPointsEstimator as StaticPointsEstimator,
     pe_measure as pe_measure,
     platform_measurements as platform_measurements,
-    platform_stream as platform_stream,
+    static_points_stream as static_points_stream,
 )
 from ._base import (
     AbstractAdjoint as AbstractAdjoint,
@@ -29,15 +29,16 @@ from ._filters import lowpass as lowpass, lowpass_delay as lowpass_delay
 from ._uio import (
     THESIS_A_U as THESIS_A_U,
     MovingCameraMeasurement as MovingCameraMeasurement,
+    MovingPointObserver as MovingPointObserver,
     UIOOutput as UIOOutput,
     UIOState as UIOState,
-    UnknownInputObserver as UnknownInputObserver,
-    moving_camera_stream as moving_camera_stream,
+    moving_point_stream as moving_point_stream,
     rank_condition as rank_condition,
     uio_matrices as uio_matrices,
     uio_residuals as uio_residuals,
 )
 from ._velocity import (
+    FixedCamera as FixedCamera,
     FrameMeasure as FrameMeasure,
     VelocityDiagnostics as VelocityDiagnostics,
     VelocityEstimator as VelocityEstimator,
@@ -48,9 +49,10 @@ from ._velocity import (
     depth_from_known_length as depth_from_known_length,
     diagonal_intersection as diagonal_intersection,
     error_signal as error_signal,
-    fixed_camera_stream as fixed_camera_stream,
+    fixed_camera as fixed_camera,
     kinematics_jacobian as kinematics_jacobian,
     paper_eq56_matrix as paper_eq56_matrix,
     plane_normal_from_frames as plane_normal_from_frames,
     velocity_measurements as velocity_measurements,
+    velocity_stream as velocity_stream,
 )

@@ -130,8 +130,8 @@ def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
     )
 
 
-def platform_stream(ts, R_b, x_b, p_s, p_c, omega_c, *, truth=None) -> Stream:
-    """The measurement `Stream` of `AdaptiveStructureEstimator` from raw measurements.
+def static_points_stream(ts, R_b, x_b, p_s, p_c, omega_c, *, truth=None) -> Stream:
+    """The measurement `Stream` of `StaticPointsEstimator` from raw measurements.
 
     **Arguments:** `ts` (N,) the sample times (any rate; `run(..., dt=...)` holds the
     samples); the measured platform pose `R_b` (N, 3, 3), `x_b` (N, 3) in the world frame;
@@ -232,7 +232,7 @@ class AdaptiveDiagnostics(eqx.Module):
     info_rate_s: Float[Array, "n 4 4"]
 
 
-# The scale-derived gains (`AdaptiveStructureEstimator.from_nominal`).
+# The scale-derived gains (`StaticPointsEstimator.from_nominal`).
 _LS_EXPONENT = 10.0  # alpha / (2 z): the decay exponent of a least-squares direction
 _STEP_FRACTION = 1.0  # h * (initial fastest rate): half of Euler's bound 2
 _RESET_RATIO = 100.0  # eta0 / eta1 of eq. (39)
@@ -241,7 +241,7 @@ _GAIN_NAMES = ("alpha_c", "alpha", "eta0", "eta1", "gamma_s0", "D", "eps_c", "ep
 
 
 @final
-class AdaptiveStructureEstimator(AbstractJumpEstimator):
+class StaticPointsEstimator(AbstractJumpEstimator):
     """Nath et al.: camera-parameter law (37)-(39) and structure law (41)-(45), output
     (50)-(51), and the camera recovered from the estimate (footnote 3).
 
@@ -308,12 +308,12 @@ class AdaptiveStructureEstimator(AbstractJumpEstimator):
         depth_guess: float | ArrayLike | None = None,
         omega_s_guess: Float[ArrayLike, "n 3"] | None = None,
         gains: dict | None = None,
-    ) -> "AdaptiveStructureEstimator":
+    ) -> "StaticPointsEstimator":
         """The estimator from nominal values only: never from the truth.
 
         **Arguments:**
 
-        - `stream`: the `platform_stream` it will run on (its first sample fixes the scale
+        - `stream`: the `static_points_stream` it will run on (its first sample fixes the scale
             of the scene; its times the step).
         - `A_nominal`, `R_c_nominal`, `x_c_nominal`: the camera as the user knows it (data
             sheet intrinsics, a mounting measured with a ruler), with the conventions of
@@ -353,11 +353,11 @@ class AdaptiveStructureEstimator(AbstractJumpEstimator):
             s); $\\eta_1 = \\eta_0/100$ (1000: no better).
         - $\\varepsilon_c = \\varepsilon_s = 0.2\\,z_{min}$.
 
-        **Returns:** an `AdaptiveStructureEstimator`. `ValueError` for a wrong shape or an
+        **Returns:** an `StaticPointsEstimator`. `ValueError` for a wrong shape or an
         unknown gain name.
         """
         if not isinstance(stream, Stream) or not isinstance(stream.ys, PlatformMeasurement):
-            raise ValueError("`stream` must be a Stream of `platform_stream`.")
+            raise ValueError("`stream` must be a Stream of `static_points_stream`.")
         A_nominal, R_c_nominal, x_c_nominal = (
             as_float(x) for x in (A_nominal, R_c_nominal, x_c_nominal)
         )
@@ -560,7 +560,7 @@ class AdaptiveStructureEstimator(AbstractJumpEstimator):
 def _from_nominal(
     cls, stream, A_nominal, R_c_nominal, x_c_nominal, h, depth_guess, omega_s_guess, gains
 ):
-    """The numerical part of `AdaptiveStructureEstimator.from_nominal` (arguments checked
+    """The numerical part of `StaticPointsEstimator.from_nominal` (arguments checked
     there), compiled once per shape instead of dispatched operation by operation."""
     ys = stream.ys
     n = ys.p_s.shape[1]

@@ -45,7 +45,7 @@ def _thesis_A_u() -> np.ndarray:
 
 THESIS_A_U = _thesis_A_u()
 """(6, 3, 3): the slopes $A_j = \\partial A / \\partial u_j$ of the thesis' $A(u)$; pass it as
-`UnknownInputObserver(A=np.zeros((3, 3)), A_u=THESIS_A_U, ...)` for $A$ from the measured
+`MovingPointObserver(A=np.zeros((3, 3)), A_u=THESIS_A_U, ...)` for $A$ from the measured
 camera velocities."""
 
 
@@ -162,12 +162,12 @@ class UIOOutput(eqx.Module):
 
 
 @final
-class UnknownInputObserver(AbstractEstimator):
+class MovingPointObserver(AbstractEstimator):
     """The nonlinear unknown input observer of eq. (3.5).
 
     $\\dot z = N z + L y + M \\bar f(\\hat x, u) + M g(y, u)$, $\\hat x = z - E y$, with
     $\\bar f(x, u) = f(x, u) - A x$ (eq. (3.2)) and $E, M, N, L$ from `uio_matrices`.
-    Measurements are `MovingCameraMeasurement`s (`moving_camera_stream`).
+    Measurements are `MovingCameraMeasurement`s (`moving_point_stream`).
 
     **The system.** $\\dot x = A x + \\bar f(x, u) + g(y, u) + D_1 d_1 + D_2 d_2$ (eqs. (3.1),
     (3.2)). $D_1$ (`D`) is decoupled exactly ($M D_1 = 0$, eq. (3.5)); $D_2$ (`D2`, default
@@ -375,7 +375,7 @@ class UnknownInputObserver(AbstractEstimator):
         return ok & (~self.time_varying | self._lyapunov_ok(meas.u))
 
 
-def moving_camera_stream(
+def moving_point_stream(
     ts: Float[ArrayLike, " N"],
     pixels: Float[ArrayLike, "N 2"],
     velocities: Float[ArrayLike, "N 6"],

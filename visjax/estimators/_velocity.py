@@ -124,14 +124,38 @@ def _jacobian_rows(A, m1, alpha1, z1_star, R, s1, Lw, Lw_inv):
     return J, J_inv
 
 
+@final
+class FixedCamera(eqx.Module):
+    """The constants of a fixed camera watching a planar object (Chitrakaran et al.,
+    sections 2-5), which travel together through every function that takes them.
+
+    **Fields:** `p_ref` (n, 2) the reference image's pixels, feature 1 first; `A` (3, 3) the
+    intrinsic matrix; `R_star` (3, 3) the known reference orientation of the object; `s1`
+    (3,) feature 1 in the object frame; `n_star` (3,) the plane normal in the reference
+    camera frame (`plane_normal_from_frames`); `z1_star` () feature 1's reference depth
+    (`depth_from_known_length`, `depth_from_feature_length`). `fixed_camera` measures
+    `n_star` and `z1_star` from the frames; all are arrays (a new value never recompiles,
+    and gradients flow through them).
+    """
+
+    p_ref: Float[Array, "n 2"] = eqx.field(converter=as_float)
+    A: Float[Array, "3 3"] = eqx.field(converter=as_float)
+    R_star: Float[Array, "3 3"] = eqx.field(converter=as_float)
+    s1: Float[Array, "3"] = eqx.field(converter=as_float)
+    n_star: Float[Array, "3"] = eqx.field(converter=as_float)
+    z1_star: Float[Array, ""] = eqx.field(converter=as_float)
+
+    def __check_init__(self):
+        if self.p_ref.ndim != 2 or self.p_ref.shape[-1] != 2 or self.p_ref.shape[0] < 4:
+            raise ValueError(f"`p_ref` must have shape (n >= 4, 2); got {tuple(self.p_ref.shape)}.")
+        for name, shape in (("A", (3, 3)), ("R_star", (3, 3)), ("s1", (3,)), ("n_star", (3,)),
+                            ("z1_star", ())):  # fmt: skip
+            check_shape(getattr(self, name), shape, name)
+
+
 def velocity_measurements(
-    p_ref: Float[ArrayLike, "n 2"],
+    camera: FixedCamera,
     p_cur: Float[ArrayLike, "n 2"],
-    A: Float[ArrayLike, "3 3"],
-    R_star: Float[ArrayLike, "3 3"],
-    s1: Float[ArrayLike, "3"],
-    z1_star: Float[ArrayLike, ""],
-    n_star: Float[ArrayLike, "3"],
     *,
     visible: Bool[ArrayLike, " n"] | None = None,
     throw: bool = True,
@@ -141,23 +165,18 @@ def velocity_measurements(
     The reconstruction uses the known-normal path (smooth at the reference pose, where the
     paper's simulation starts); $R = \\bar R R^*$ (eq. (8)).
 
-    **Arguments:** `p_ref`, `p_cur` reference and current pixels, feature 1 first; `A`;
-    `R_star` the known reference orientation; `s1` feature 1 in the object frame; `z1_star`
-    its reference depth (`depth_from_known_length`); `n_star` the plane normal
-    (`plane_normal_from_frames`); `visible`: optional (n,) booleans, the features seen in
-    this frame (the homography is fitted to these; of more than four features at least
-    four must be seen; feature 1 may be among the missing: its pixel then follows from the
-    homography, $p_1 \\sim G_n p_1^*$, eq. (17)); `throw` as in `euclidean_reconstruction`.
+    **Arguments:** `camera` the fixed camera's constants (`FixedCamera`: the reference
+    pixels, $A$, $R^*$, $s_1$, $n^*$, $z_1^*$); `p_cur` the current pixels, feature 1 first;
+    `visible`: optional (n,) booleans, the features seen in this frame (the homography is
+    fitted to these; of more than four features at least four must be seen; feature 1 may
+    be among the missing: its pixel then follows from the homography,
+    $p_1 \\sim G_n p_1^*$, eq. (17)); `throw` as in `euclidean_reconstruction`.
 
     **Returns:** a `VelocityMeasurement`; with `throw=False` its `result` says whether the
     frame was measured (a failed frame is all NaN).
     """
-    p_ref = check_points(p_ref, "p_ref")
-    A = as_float(A)
-    R_star = as_float(R_star)
-    check_shape(R_star, (3, 3), "R_star")
-    s1 = as_float(s1)
-    check_shape(s1, (3,), "s1")
+    p_ref, A, R_star, s1 = camera.p_ref, camera.A, camera.R_star, camera.s1
+    z1_star, n_star = camera.z1_star, camera.n_star
     rec = euclidean_reconstruction(p_ref, p_cur, A, n_star=n_star, visible=visible, throw=False)
     p_cur = as_float(p_cur)
     if visible is not None:
@@ -534,36 +553,20 @@ class VelocityEstimator(AbstractEstimator):
 
 @final
 class FrameMeasure(eqx.Module):
-    """`velocity_measurements` of one frame with the scene's constants: the `measure` of a
-    `fixed_camera_stream`, applied by `run` in chunks fused with the time loop.
+    """`velocity_measurements` of one frame with the fixed camera's constants: the `measure`
+    of a `velocity_stream`, applied by `run` in chunks fused with the time loop.
 
-    **Fields:** `p_ref`, `A`, `R_star`, `s1`, `z1_star`, `n_star` as in
-    `velocity_measurements`; `dropouts` (static): a NaN pixel is a feature out of view.
-    Calling it on a frame's pixels (n, 2) returns its `VelocityMeasurement` (never raises:
-    a failed frame is all NaN with its `result`).
+    **Fields:** `camera` (`FixedCamera`); `dropouts` (static): a NaN pixel is a feature out
+    of view. Calling it on a frame's pixels (n, 2) returns its `VelocityMeasurement` (never
+    raises: a failed frame is all NaN with its `result`).
     """
 
-    p_ref: Float[Array, "n 2"] = eqx.field(converter=as_float)
-    A: Float[Array, "3 3"] = eqx.field(converter=as_float)
-    R_star: Float[Array, "3 3"] = eqx.field(converter=as_float)
-    s1: Float[Array, "3"] = eqx.field(converter=as_float)
-    z1_star: Float[Array, ""] = eqx.field(converter=as_float)
-    n_star: Float[Array, "3"] = eqx.field(converter=as_float)
+    camera: FixedCamera
     dropouts: bool = eqx.field(default=False, static=True)
 
     def __call__(self, pixels: Float[Array, "n 2"]) -> VelocityMeasurement:
         visible = jnp.all(jnp.isfinite(pixels), axis=-1) if self.dropouts else None
-        return velocity_measurements(
-            self.p_ref,
-            pixels,
-            self.A,
-            self.R_star,
-            self.s1,
-            self.z1_star,
-            self.n_star,
-            visible=visible,
-            throw=False,
-        )
+        return velocity_measurements(self.camera, pixels, visible=visible, throw=False)
 
 
 @eqx.filter_jit
@@ -572,68 +575,53 @@ def _frame_results(measure, pixels, batch_size):
     return chunked_map(lambda pc: measure(pc).result, pixels, batch_size)
 
 
-def fixed_camera_stream(
-    ts: Float[ArrayLike, " N"],
+def _check_frames(pixels, ts=None):
+    pixels = as_float(pixels)
+    if pixels.ndim != 3 or pixels.shape[-1] != 2:
+        raise ValueError(f"`pixels` must have shape (N, n, 2); got {tuple(pixels.shape)}.")
+    if ts is not None and as_float(ts).shape != pixels.shape[:1]:
+        raise ValueError(
+            f"`ts` must have one time per frame, shape ({pixels.shape[0]},); "
+            f"got {as_float(ts).shape}."
+        )
+    return pixels
+
+
+def fixed_camera(
     pixels: Float[ArrayLike, "N n 2"],
     A: Float[ArrayLike, "3 3"],
     R_star: Float[ArrayLike, "3 3"],
     s1: Float[ArrayLike, "3"],
     *,
-    origin_pixel: Float[ArrayLike, "2"] | None = None,
+    reference_pixels: Float[ArrayLike, "n 2"] | None = None,
     n_star: Float[ArrayLike, "3"] | None = None,
     z1_star: Float[ArrayLike, ""] | None = None,
     n_prior: Float[ArrayLike, "3"] | None = None,
     known_length: tuple | None = None,
-    reference_pixels: Float[ArrayLike, "n 2"] | None = None,
+    origin_pixel: Float[ArrayLike, "2"] | None = None,
     dropouts: bool = False,
-    truth=None,
     throw: bool = True,
-    chunk: int = 256,
-):
-    """The measurement `Stream` of the velocity estimator from raw pixel frames.
+) -> FixedCamera:
+    """The fixed camera's constants (`FixedCamera`), the unknown ones measured once from the
+    frames (Chitrakaran et al., sections 3-5).
 
     The reference image (the pose $R^*$ describes) is frame 0, or `reference_pixels` when
-    given (an image taken before the run, or any other frame: the run then starts at the
-    first frame of `pixels`, with $\\hat e(t_0) = e(t_0)$, not at the reference).
-    Unknown constants are measured first, once: the plane normal by
-    `plane_normal_from_frames` (unless `n_star` is given), then $z_1^*$ (unless `z1_star`
-    is given): by `depth_from_feature_length` when `known_length = (i, j, L)`
-    names two features and their distance (the paper's premise; any coplanar set), else by
-    `depth_from_known_length` with the origin's pixel (default: `diagonal_intersection` of
-    the four reference features).
+    given (an image taken before the run, or any other frame). The plane normal by
+    `plane_normal_from_frames` (unless `n_star` is given; `n_prior` picks between the two
+    decompositions), then $z_1^*$ (unless `z1_star` is given): by
+    `depth_from_feature_length` when `known_length = (i, j, L)` names two features and their
+    distance (the paper's premise; any coplanar set), else by `depth_from_known_length`
+    with the origin's pixel (default: `diagonal_intersection` of the four reference
+    features).
 
-    The stream's `ys` are the pixels and its `measure` a `FrameMeasure` of these constants:
-    $e$, $J$, $J^{-1}$ of each frame are computed by `run` in chunks of `chunk` steps fused
-    with the time loop, so a run of any length needs memory for one chunk of prepared
-    frames, not for the whole trajectory (`Stream.measured()` prepares them all, to look
-    at them). The default suits `vmap` over many runs (about 16,000 frames per chunk call,
-    batch x `chunk`, is fastest on a CPU); for one long trajectory `chunk=len(ts)` with
-    `run(..., unroll=8)` runs twice as fast (~700 bytes per prepared frame).
-
-    With `throw=False` a frame that cannot be measured (a NaN pixel, degenerate points)
-    is all NaN, and `run` stops there with `RESULTS.nonfinite_measurement` and its index;
-    a depth recovery that fails (its premise broken, or a plane normal too coarse from a
-    few seconds of noisy frames: give `known_length` then) makes $z_1^*$ NaN and every
-    frame's result `RESULTS.invalid_intrinsics`, so `run` stops at the first sample. With
-    `throw=True` building the stream raises (one pass over the frames for their result
-    codes, `chunk` at a time).
-
-    With `dropouts=True` a NaN pixel is a feature out of view in that frame (the reference
-    pixels must all be finite): the homography is fitted to the features seen (with more
-    than four features, any four or more; feature 1 may be among the missing), and a frame
-    with too few is marked absent in `Stream.present`, so that `run` holds the previous
-    frame over it. The first frame must be measurable.
-
-    **Returns:** `(stream, n_star, z1_star)`.
+    With `dropouts=True` a NaN pixel is a feature out of view (the reference pixels must all
+    be finite). With `throw=False` a depth recovery that fails (its premise broken, or a
+    plane normal too coarse from a few seconds of noisy frames: give `known_length` then)
+    makes $z_1^*$ NaN, and `velocity_stream` then marks every frame
+    `RESULTS.invalid_intrinsics`, so `run` stops at the first sample; with `throw=True` it
+    raises.
     """
-    pixels = as_float(pixels)
-    ts = as_float(ts)
-    if pixels.ndim != 3 or pixels.shape[-1] != 2:
-        raise ValueError(f"`pixels` must have shape (N, n, 2); got {tuple(pixels.shape)}.")
-    if ts.shape != pixels.shape[:1]:
-        raise ValueError(
-            f"`ts` must have one time per frame, shape ({pixels.shape[0]},); got {ts.shape}."
-        )
+    pixels = _check_frames(pixels)
     if reference_pixels is None:
         p_ref = pixels[0]
     else:
@@ -663,16 +651,55 @@ def fixed_camera_stream(
         z1_star = depth_from_known_length(
             p_ref[0], origin_pixel, A, n_star, R_star, s1, throw=throw
         )
-    z1_star = as_float(z1_star)
-    measure = FrameMeasure(
-        p_ref=p_ref,
-        A=A,
-        R_star=R_star,
-        s1=s1,
-        z1_star=z1_star,
-        n_star=as_float(n_star),
-        dropouts=dropouts,
-    )
+    return FixedCamera(p_ref=p_ref, A=A, R_star=R_star, s1=s1, n_star=n_star, z1_star=z1_star)
+
+
+def velocity_stream(
+    ts: Float[ArrayLike, " N"],
+    pixels: Float[ArrayLike, "N n 2"],
+    camera: FixedCamera,
+    *,
+    dropouts: bool = False,
+    truth=None,
+    throw: bool = True,
+    chunk: int = 256,
+) -> Stream:
+    """The measurement `Stream` of the velocity estimator from raw pixel frames and the
+    fixed camera's constants (`fixed_camera` measures them from the same frames).
+
+    The run starts at the first frame of `pixels`, with $\\hat e(t_0) = e(t_0)$ (the
+    reference image is `camera.p_ref`). The stream's `ys` are the pixels and its `measure`
+    a `FrameMeasure` of the camera: $e$, $J$, $J^{-1}$ of each frame are computed by `run`
+    in chunks of `chunk` steps fused with the time loop, so a run of any length needs
+    memory for one chunk of prepared frames, not for the whole trajectory
+    (`Stream.measured()` prepares them all, to look at them). The default suits `vmap` over
+    many runs (about 16,000 frames per chunk call, batch x `chunk`, is fastest on a CPU);
+    for one long trajectory `chunk=len(ts)` with `run(..., unroll=8)` runs twice as fast
+    (~700 bytes per prepared frame).
+
+    A missing sample is a NaN pixel. With `dropouts=True` it is a feature out of view in
+    that frame: the homography is fitted to the features seen (with more than four
+    features, any four or more; feature 1 may be among the missing), and a frame with too
+    few is marked absent in `Stream.present`, so that `run` holds the previous frame over
+    it; the first frame must be measurable. With `dropouts=False` a frame that cannot be
+    measured (a NaN pixel, degenerate points) raises with `throw=True` (one pass over the
+    frames for their result codes, `chunk` at a time), and with `throw=False` is all NaN:
+    `run` stops there with `RESULTS.nonfinite_measurement` and its index.
+
+    **Returns:** the `Stream` (its `measure.camera` is `camera`).
+    """
+    pixels = _check_frames(pixels, ts)
+    ts = as_float(ts)
+    if not isinstance(camera, FixedCamera):
+        raise TypeError(
+            f"`camera` must be a FixedCamera (see `fixed_camera`); got {type(camera).__name__}."
+        )
+    if camera.p_ref.shape != pixels.shape[1:]:
+        raise ValueError(
+            f"`camera.p_ref` must have the frames' shape {tuple(pixels.shape[1:])}; "
+            f"got {tuple(camera.p_ref.shape)}."
+        )
+    measure = FrameMeasure(camera=camera, dropouts=dropouts)
     present = None
     if dropouts or throw:
         # one pass over the frames for their result codes only, `chunk` at a time
@@ -682,7 +709,7 @@ def fixed_camera_stream(
             # the first frame starts the estimator: it must be measured
             if throw:
                 present = eqx.error_if(
-                    present, ~present[0], "fixed_camera_stream: the first frame cannot be measured."
+                    present, ~present[0], "velocity_stream: the first frame cannot be measured."
                 )
         else:
             # the first frame that cannot be measured raises with its own message (the
@@ -690,7 +717,6 @@ def fixed_camera_stream(
             # of the frames)
             bad = results != RESULTS.successful
             first = jax.tree_util.tree_map(lambda v: v[jnp.argmax(bad)], results)
-            checked = first.error_if(measure.p_ref, jnp.any(bad))
-            measure = eqx.tree_at(lambda m: m.p_ref, measure, checked)
-    stream = Stream(ts=ts, ys=pixels, truth=truth, present=present, measure=measure, chunk=chunk)
-    return stream, n_star, z1_star
+            checked = first.error_if(camera.p_ref, jnp.any(bad))
+            measure = eqx.tree_at(lambda m: m.camera.p_ref, measure, checked)
+    return Stream(ts=ts, ys=pixels, truth=truth, present=present, measure=measure, chunk=chunk)

@@ -7,8 +7,8 @@ summary (`Outputs`, `write_outputs`, `command_summary`)."""
 
 from ._formats import (
     DataFormatError as DataFormatError,
-    EuclideanData as EuclideanData,
-    StructureData as StructureData,
+    MovingPointData as MovingPointData,
+    StaticPointsData as StaticPointsData,
     VelocityData as VelocityData,
     load_tracks_csv as load_tracks_csv,
     save_tracks_csv as save_tracks_csv,

@@ -197,7 +197,7 @@ class VelocityData(_Format):
 
 
 @dataclass
-class StructureData(_Format):
+class MovingPointData(_Format):
     """The unknown input observer's input (module docstring); arrays as NumPy."""
 
     t: np.ndarray
@@ -238,7 +238,7 @@ class StructureData(_Format):
 
 
 @dataclass
-class EuclideanData(_Format):
+class StaticPointsData(_Format):
     """The adaptive structure estimator's input (module docstring); arrays as NumPy."""
 
     t: np.ndarray

@@ -51,8 +51,8 @@ def _failure(sol, what: str) -> str | None:
 def velocity_from_file(path, filter_hz=None) -> FileEstimate:
     """The velocity estimator of Chitrakaran et al. (eqs. (39)-(40)) on a
     `visjax.io.VelocityData` file: $n^*$ from the frames, $z_1^*$ from the known length
-    (`fixed_camera_stream`), the file's gains (eq. (63) if none), the file's own rate where
-    the gains allow it (`integration_step`), and with `filter_hz` a causal 2nd-order
+    (`fixed_camera`, `velocity_stream`), the file's gains (eq. (63) if none), the file's own
+    rate where the gains allow it (`integration_step`), and with `filter_hz` a causal 2nd-order
     low-pass of the estimate (`lowpass`)."""
     import jax.numpy as jnp
 
@@ -60,18 +60,18 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
     from ..estimators import (
         SaveAt,
         VelocityEstimator,
-        fixed_camera_stream,
+        fixed_camera,
         integration_step,
         lowpass,
         lowpass_delay,
         run,
+        velocity_stream,
     )
     from ..io import VelocityData
     from .chitrakaran import DOF_NAMES, K_EQ63, RHO_EQ63
 
     data = VelocityData.load(path)
-    stream, n_star, z1_star = fixed_camera_stream(
-        data.t,
+    camera = fixed_camera(
         data.pixels,
         data.A,
         data.R_star,
@@ -80,6 +80,8 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
         reference_pixels=data.reference_pixels,
         dropouts=True,
     )
+    stream = velocity_stream(data.t, data.pixels, camera, dropouts=True)
+    n_star, z1_star = camera.n_star, camera.z1_star
     K = K_EQ63 if data.K is None else data.K
     rho = RHO_EQ63 if data.rho is None else data.rho
     est = VelocityEstimator(K=K, rho=rho)
@@ -115,19 +117,19 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
 
 def moving_point_from_file(path) -> FileEstimate:
     """The unknown input observer of Jang's thesis (eq. (3.5)) on a
-    `visjax.io.StructureData` file: the observer and its gains from
+    `visjax.io.MovingPointData` file: the observer and its gains from
     `moving_point_observer_for_data` (the LMI design for the file's camera motion), dropped
     frames extrapolated from the last two seen, 1 kHz on the held frames; the estimate at
     each frame time (the grid point at or just after it)."""
     from .._results import result_names
-    from ..estimators import SaveAt, integration_step, moving_camera_stream, run
-    from ..io import StructureData
+    from ..estimators import SaveAt, integration_step, moving_point_stream, run
+    from ..io import MovingPointData
     from ._moving_point import moving_point_observer_for_data
 
-    data = StructureData.load(path)
+    data = MovingPointData.load(path)
     t = np.asarray(data.t, float)
     observer, u, info = moving_point_observer_for_data(data)
-    stream = moving_camera_stream(t, data.pixels, u, data.A, dropped="extrapolate")
+    stream = moving_point_stream(t, data.pixels, u, data.A, dropped="extrapolate")
     dt = integration_step(stream, observer, max_step=1e-3)  # the thesis' 1 kHz law
     sol = run(observer, stream, dt=dt, saveat=SaveAt(), throw=False)
     failure = _failure(sol, "observer")
@@ -153,30 +155,30 @@ def moving_point_from_file(path) -> FileEstimate:
 
 def static_points_from_file(path) -> FileEstimate:
     """The adaptive structure estimator of Nath et al. (eqs. (37)-(51)) on a
-    `visjax.io.EuclideanData` file: built from the file's nominal camera
-    (`AdaptiveStructureEstimator.from_nominal`: initial guesses and gains from the scene's
+    `visjax.io.StaticPointsData` file: built from the file's nominal camera
+    (`StaticPointsEstimator.from_nominal`: initial guesses and gains from the scene's
     scale, never from a truth), 1 kHz on the held samples (at the samples if they are
     faster), features out of view (NaN) masked in both laws; saved every 10 ms."""
     from .._results import result_names
     from ..estimators import (
-        AdaptiveStructureEstimator,
         SaveAt,
+        StaticPointsEstimator,
         integration_step,
-        platform_stream,
         run,
+        static_points_stream,
     )
-    from ..io import EuclideanData
+    from ..io import StaticPointsData
 
-    data = EuclideanData.load(path)
+    data = StaticPointsData.load(path)
     k = data.n_known
     pixels = np.asarray(data.pixels, float)
-    stream = platform_stream(
+    stream = static_points_stream(
         data.t, data.platform_R, data.platform_x, pixels[:, k:], pixels[:, :k], data.known_features
     )
     longest = float(np.max(np.diff(np.asarray(data.t, float))))
     # the gains of `from_nominal` are derived for the step, so no bound applies here
     dt = integration_step(stream, max_step=1e-3)
-    est = AdaptiveStructureEstimator.from_nominal(
+    est = StaticPointsEstimator.from_nominal(
         stream, data.A_nominal, data.R_c_nominal, data.x_c_nominal, dt=dt
     )
     every = max(1, int(round(0.01 / (longest if dt is None else dt))))

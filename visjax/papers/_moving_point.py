@@ -20,7 +20,7 @@ class MovingPointProblem(AbstractProblem):
     30 Hz frames (the thesis' logger); `batch` and `batch_window`, triangulation over all
     frames up to $t$ and over the last `window_s` seconds (both causal; a static point
     model for a static set, constant velocity for a moving one); `ekf`, the inverse-depth
-    EKF (`baselines.uio_ekf`, predicted at 1 ms).
+    EKF (`baselines.moving_point_ekf`, predicted at 1 ms).
 
     Parameters: `K` and `Y` (the observer's gains, 3 x 2: the set's published ones, or the
     LMI design for a data file; entries of either sign) and `K_scale`, `Y_scale`,
@@ -87,21 +87,21 @@ class MovingPointProblem(AbstractProblem):
         return WindowRMS(*self.window_s, field="position")
 
     def _frames(self, pixels):
-        from ..estimators import moving_camera_stream
+        from ..estimators import moving_point_stream
 
-        return moving_camera_stream(
+        return moving_point_stream(
             self.frame_ts, pixels, self.frame_velocities, self.Kc, dropped="extrapolate"
         )
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ..baselines import triangulate_point, uio_ekf
-        from ..estimators import SaveAt, moving_camera_stream, run
+        from ..baselines import moving_point_ekf, triangulate_point
+        from ..estimators import SaveAt, moving_point_stream, run
 
         pixels = inputs["pixels"]
         if method == "estimator":
             k = self.frame_index
             truth = None if self.truth is None else held(self.truth_ts, self.truth, self.ts)
-            stream = moving_camera_stream(
+            stream = moving_point_stream(
                 self.ts, pixels[k], self.frame_velocities[k], self.Kc, truth=truth
             )
             obs = eqx.tree_at(
@@ -131,7 +131,7 @@ class MovingPointProblem(AbstractProblem):
         if method == "ekf":
             interval = float(np.median(np.diff(np.asarray(self.frame_ts))))
             depth0 = 1.0 / float(np.asarray(self.observer.x3_guess))
-            return uio_ekf(
+            return moving_point_ekf(
                 self._frames(pixels),
                 r_norm=max(self.noise_px, 0.05) / float(np.asarray(self.Kc)[0, 0]),
                 depth0=depth0,
@@ -253,7 +253,7 @@ def moving_point_problem(
 ) -> MovingPointProblem:
     """The `moving_point` problem (`MovingPointProblem`) on the simulated analogue of a
     thesis set (`variant`, default `"I.1"`, a static point; `duration` s) or on a
-    `visjax.io.StructureData` file (`data`: its observer from
+    `visjax.io.MovingPointData` file (`data`: its observer from
     `moving_point_observer_for_data`'s LMI design, 1 kHz on its frames), with
     `noise_px` of pixel noise per seed.
 
@@ -270,9 +270,9 @@ def moving_point_problem(
     if data is not None:
         if variant is not None:
             raise ValueError("a thesis set (`variant`) and a data file exclude each other.")
-        from ..io import StructureData
+        from ..io import MovingPointData
 
-        d = StructureData.load(data)
+        d = MovingPointData.load(data)
         observer, u, _ = moving_point_observer_for_data(d)
         frame_ts = jnp.asarray(d.t, float)
         t0, t1 = float(frame_ts[0]), float(frame_ts[-1])
@@ -330,7 +330,7 @@ def moving_point_problem(
 
 
 def moving_point_observer_for_data(data):
-    """The unknown input observer of Jang's thesis for a `StructureData` file, and the
+    """The unknown input observer of Jang's thesis for a `MovingPointData` file, and the
     camera velocities at the frame times.
 
     The camera velocities are interpolated (linearly) to the frame times; the observer's
@@ -346,7 +346,7 @@ def moving_point_observer_for_data(data):
     `info` a dict (`depth_guess_m`, `D`, `design`, `unmodelled_motion`).
     """
     from ..design import design_uio_for_motion
-    from ..estimators import UnknownInputObserver
+    from ..estimators import MovingPointObserver
 
     t = np.asarray(data.t, float)
     u = np.stack(
@@ -360,7 +360,7 @@ def moving_point_observer_for_data(data):
     frame_dt = float(np.median(np.diff(t)))
     design, rate = design_uio_for_motion(np.zeros((3, 3)), C, D, u_range, u[:250], frame_dt)
     depth_guess = 1.0 if data.depth_guess is None else float(data.depth_guess)
-    observer = UnknownInputObserver(
+    observer = MovingPointObserver(
         A=np.zeros((3, 3)), D=D, x3_guess=1.0 / depth_guess, **design.observer_fields()
     )
     info = {

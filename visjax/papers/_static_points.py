@@ -32,11 +32,11 @@ class StaticPointsProblem(AbstractProblem):
     with `static_points_problem`.
 
     Methods: `estimator`, the adaptive least-squares estimator (eqs. (37)-(51),
-    `AdaptiveStructureEstimator.from_nominal`: gains from the scene's scale, initial
+    `StaticPointsEstimator.from_nominal`: gains from the scene's scale, initial
     guesses from the nominal camera, derived per run from that run's noisy stream;
     integrated at 1 kHz on the held samples); `batch`, bundle adjustment over all frames;
     `batch_window`, over the last `window_s` seconds every `every_s` seconds (causal);
-    `ekf`, `baselines.euclidean_ekf`; all from the same initial guesses.
+    `ekf`, `baselines.static_points_ekf`; all from the same initial guesses.
 
     Parameters: `alpha_scale` multiplies $\\alpha_c$ and $\\alpha$ (eqs. (37), (41)) and
     `gamma_scale` the initial gains $\\eta_0$, $\\eta_1$ and $\\gamma_{s0}$ (eqs. (39),
@@ -92,19 +92,19 @@ class StaticPointsProblem(AbstractProblem):
         return {"pixels": add_pixel_noise(key, self.clean, self.noise_px)}
 
     def _estimator(self, pixels):
-        from ..estimators import AdaptiveStructureEstimator, platform_stream
+        from ..estimators import StaticPointsEstimator, static_points_stream
 
         k = self.n_known
-        stream = platform_stream(
+        stream = static_points_stream(
             self.ts, self.R_b, self.x_b, pixels[:, k:], pixels[:, :k], self.omega_c
         )
-        est = AdaptiveStructureEstimator.from_nominal(
+        est = StaticPointsEstimator.from_nominal(
             stream, self.A_nominal, self.R_c_nominal, self.x_c_nominal, dt=self.dt
         )
         return stream, est
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ..baselines import bundle_adjustment, euclidean_ekf
+        from ..baselines import bundle_adjustment, static_points_ekf
         from ..estimators import SaveAt, run
 
         stream, est = self._estimator(inputs["pixels"])
@@ -134,7 +134,7 @@ class StaticPointsProblem(AbstractProblem):
             sol = bundle_adjustment(est, stream, self.omega_c, throw=False, **window)
             omega_s = sol.outputs.omega_s[-1]
         elif method == "ekf":
-            sol = euclidean_ekf(
+            sol = static_points_ekf(
                 est, stream, self.omega_c, r_px=max(self.noise_px, 0.05), throw=False
             )
             omega_s = sol.outputs.omega_s[-1]
@@ -204,9 +204,9 @@ def static_points_problem(
 ) -> StaticPointsProblem:
     """The `static_points` problem (`StaticPointsProblem`) on the project's scene
     (`papers.nath.scenario`, `duration` at `rate_hz`, the nominal camera of
-    `nath.nominal_camera`) or on a `visjax.io.EuclideanData` file, with `noise_px` of
+    `nath.nominal_camera`) or on a `visjax.io.StaticPointsData` file, with `noise_px` of
     pixel noise per seed. The EKF assumes the pixel noise `max(noise_px, 0.05)`; its prior
-    spreads are those of `euclidean_ekf` (a nominal camera's uncertainty)."""
+    spreads are those of `static_points_ekf` (a nominal camera's uncertainty)."""
     from ..estimators import Stream, integration_step
     from . import nath
 
@@ -219,9 +219,9 @@ def static_points_problem(
         n_known, truth, nominal = sc.p_c.shape[1], sc.omega_s, nath.nominal_camera()
         source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz"
     else:
-        from ..io import EuclideanData
+        from ..io import StaticPointsData
 
-        d = EuclideanData.load(data)
+        d = StaticPointsData.load(data)
         ts, R_b, x_b, omega_c = (
             jnp.asarray(x, float) for x in (d.t, d.platform_R, d.platform_x, d.known_features)
         )

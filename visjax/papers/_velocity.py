@@ -109,24 +109,14 @@ class VelocityProblem(AbstractProblem):
         return WindowRMS(t0 + a, t0 + b + 1e-9, field="v_hat")
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ..estimators import SaveAt, VelocityEstimator, fixed_camera_stream, run
+        from ..estimators import SaveAt, VelocityEstimator, run, velocity_stream
 
         pixels = inputs["pixels"]
         if method == "estimator":
-            stream, _, _ = fixed_camera_stream(
-                self.ts,
-                pixels,
-                self.A,
-                self.R_star,
-                self.s1,
-                n_star=self.n_star,
-                z1_star=self.z1_star,
-                reference_pixels=self.reference_pixels,
-                dropouts=self.dropouts,
-                truth=self.truth,
-                throw=False,
-                chunk=self.chunk,
-            )
+            stream = velocity_stream(
+                self.ts, pixels, self._camera(pixels), dropouts=self.dropouts, truth=self.truth,
+                throw=False, chunk=self.chunk,
+            )  # fmt: skip
             est = VelocityEstimator(
                 K=params["K"] * params["K_scale"], rho=params["rho"] * params["rho_scale"]
             )
@@ -146,33 +136,38 @@ class VelocityProblem(AbstractProblem):
 
             return velocity_ekf(
                 self.ts,
-                *self._constants(pixels),
+                pixels,
+                self._camera(pixels),
                 r_px=max(self.noise_px, 0.05),
                 max_jerk=self.max_jerk,
                 max_angular_jerk=self.max_jerk,
-                reference_pixels=self.reference_pixels,
                 throw=False,
             )
         raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
 
-    def _constants(self, pixels):
-        return (pixels, self.A, self.R_star, self.s1, self.n_star, self.z1_star)
+    def _camera(self, pixels):
+        """The fixed camera's constants; the reference image is the first frame of this
+        draw unless the problem has its own."""
+        from ..estimators import FixedCamera
+
+        p_ref = pixels[0] if self.reference_pixels is None else self.reference_pixels
+        return FixedCamera(p_ref, self.A, self.R_star, self.s1, self.n_star, self.z1_star)
 
     def _fit(self, pixels, causal):
         from .._results import RESULTS, first_failure
         from ..baselines import frame_poses, velocity_smoother
 
-        args = self._constants(pixels)
-        poses = frame_poses(*args, reference_pixels=self.reference_pixels)
+        camera = self._camera(pixels)
+        poses = frame_poses(pixels, camera)
         interval = float(np.median(np.diff(np.asarray(self.ts))))
         sols = {
             bw: velocity_smoother(
                 self.ts,
-                *args,
+                pixels,
+                camera,
                 bandwidth_hz=bw,
                 causal=causal,
                 sample_interval=interval,
-                reference_pixels=self.reference_pixels,
                 poses=poses,
                 throw=False,
             )
@@ -264,11 +259,11 @@ def velocity_problem(
     Stated settings: the EKF assumes the pixel noise `max(noise_px, 0.05)` and the largest
     jerk `max_jerk` (default 0.2 m/s^3 and rad/s^3 for the paper's scenario, whose velocity
     is 0.2 sin t; 1.0 for a file). `chunk`: frames per fused chunk of the stream
-    (`fixed_camera_stream`); fastest on a 2-core CPU at about 16,000 frames per chunk call,
-    chunk x the vmapped batch. `adjoint`: the runner's (default `DirectAdjoint()`;
+    (`velocity_stream`); fastest on a 2-core CPU at about 16,000 frames per chunk call, chunk
+    x the vmapped batch. `adjoint`: the runner's (default `DirectAdjoint()`;
     `CheckpointAdjoint()` for reverse-mode tuning of many gains).
     """
-    from ..estimators import fixed_camera_stream
+    from ..estimators import fixed_camera
     from .chitrakaran import K_EQ63, RHO_EQ63, section6_scenario, window
 
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
@@ -294,16 +289,10 @@ def velocity_problem(
         rho = RHO_EQ63 if d.rho is None else d.rho
         source = str(data)
     dropouts = bool(np.any(~np.isfinite(np.asarray(clean))))
-    _, n_star, z1_star = fixed_camera_stream(
-        ts,
-        clean,
-        A,
-        R_star,
-        s1,
-        known_length=known_length,
-        reference_pixels=p_ref,
-        dropouts=dropouts,
+    camera = fixed_camera(
+        clean, A, R_star, s1, known_length=known_length, reference_pixels=p_ref, dropouts=dropouts
     )
+    n_star, z1_star = camera.n_star, camera.z1_star
     jerk = (0.2 if data is None else 1.0) if max_jerk is None else float(max_jerk)
     K, rho = jnp.asarray(K, float), jnp.asarray(rho, float)
     return VelocityProblem(

@@ -38,8 +38,9 @@ from ..estimators import (
     SaveAt,
     VelocityEstimator,
     WindowRMS,
-    fixed_camera_stream,
+    fixed_camera,
     run,
+    velocity_stream,
 )
 from ..io import Outputs
 from ..sim import (
@@ -190,9 +191,9 @@ def velocity_experiment(
     # features 1 and 3, the square's diagonal (with noisy frames the plane normal is too
     # coarse for the object-origin path, `depth_from_known_length`)
     length = jnp.linalg.norm(sc.s[0] - sc.s[2])
-    stream, n_star, z1_star = fixed_camera_stream(
-        sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0], known_length=(0, 2, length)
-    )
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], known_length=(0, 2, length))
+    stream = velocity_stream(sc.ts, sc.pixels, camera)
+    n_star, z1_star = camera.n_star, camera.z1_star
     progress("estimate")
     sol = run(VelocityEstimator(K=K, rho=rho), stream)
     return VelocityRun(
@@ -237,7 +238,8 @@ def noise_study(
     **Returns:** `{noise: array (seeds, 6)}` of RMS errors.
     """
     sc = section6_scenario(duration, rate_hz)
-    _, n_star, z1_star = fixed_camera_stream(sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0])
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    n_star, z1_star = camera.n_star, camera.z1_star
     a, b = window(duration)
     red = WindowRMS(a, b, field="v_hat")
     est = VelocityEstimator(K=K, rho=rho)
@@ -245,16 +247,8 @@ def noise_study(
     @jax.jit
     def rms(key, sigma):
         pixels = sc.pixels + sigma * jax.random.normal(key, sc.pixels.shape)
-        stream, _, _ = fixed_camera_stream(
-            sc.ts,
-            pixels,
-            sc.A,
-            sc.R_star,
-            sc.s[0],
-            n_star=n_star,
-            z1_star=z1_star,
-            truth=sc.velocity,
-        )
+        camera = fixed_camera(pixels, sc.A, sc.R_star, sc.s[0], n_star=n_star, z1_star=z1_star)
+        stream = velocity_stream(sc.ts, pixels, camera, truth=sc.velocity)
         return run(est, stream, saveat=SaveAt(outputs=False), reducer=red).summary.rms
 
     keys = jax.random.split(jax.random.key(0), seeds)

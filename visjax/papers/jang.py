@@ -49,10 +49,10 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._results import RESULTS, result_names
 from ..estimators import (
+    MovingPointObserver,
     SaveAt,
     Stream,
-    UnknownInputObserver,
-    moving_camera_stream,
+    moving_point_stream,
     run,
 )
 from ..io import Outputs
@@ -197,7 +197,7 @@ class ThesisScenario(eqx.Module):
 
     def camera_stream(self) -> Stream:
         """The UIO's stream of the 30 Hz camera frames (run it with `dt=1e-3`)."""
-        return moving_camera_stream(
+        return moving_point_stream(
             self.frame_ts, self.frame_pixels, self.frame_velocities, self.Kc_observer
         )
 
@@ -205,7 +205,7 @@ class ThesisScenario(eqx.Module):
         """The same frames held at the 1 kHz samples (as a logger at 1 kHz records them),
         with the true state as `truth`."""
         k = self.frame_index
-        return moving_camera_stream(
+        return moving_point_stream(
             self.ts,
             self.frame_pixels[k],
             self.frame_velocities[k],
@@ -271,10 +271,10 @@ def scenario(
     )
 
 
-def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> UnknownInputObserver:
+def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> MovingPointObserver:
     """The UIO of a thesis set, with the thesis' gains unless `K`, `Y` are given."""
     s = SETS[set_name]
-    return UnknownInputObserver(
+    return MovingPointObserver(
         A=s.A,
         D=jnp.array(s.D, float)[:, None],
         K=s.K if K is None else K,
@@ -640,7 +640,7 @@ def testbed(
     obs = observer(set_name, x3_guess_cm=100.0 if units == "cm" else 1.0)
 
     def estimate_from(px):
-        stream = moving_camera_stream(
+        stream = moving_point_stream(
             frame_ts, px, vel_obs, jnp.asarray(Kc_observer, float), dropped="hold"
         )
         sol = run(obs, stream, dt=1.0 / rate_hz, throw=False)

@@ -26,12 +26,12 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..estimators import (
-    AdaptiveStructureEstimator,
     SaveAt,
+    StaticPointsEstimator,
     Stream,
     pe_measure,
-    platform_stream,
     run,
+    static_points_stream,
 )
 from ..geometry import camera_parameters, intrinsics_eq4, so3_exp
 from ..io import Outputs
@@ -149,7 +149,7 @@ def nominal_camera() -> tuple[Float[Array, "3 3"], Float[Array, "3 3"], Float[Ar
     return A, R_c, jnp.array([0.07, -0.05, 0.12])
 
 
-# Overrides of the gains that `AdaptiveStructureEstimator.from_nominal` derives from the
+# Overrides of the gains that `StaticPointsEstimator.from_nominal` derives from the
 # scene's scale (its docstring states the rule): none. Version 1's hand settings (alpha_c =
 # alpha = 100, eta0 = 1e-5, eta1 = 1e-7, gamma_s0 = 1e-5, eps = 0.2 m, on raw pixels) are
 # gone with the pixel normalisation (their units changed).
@@ -175,21 +175,21 @@ class EuclideanRun(eqx.Module):
 
 def initial_estimator(
     sc: UncalibratedScenario, gains=None, *, dt: float | None = None
-) -> AdaptiveStructureEstimator:
+) -> StaticPointsEstimator:
     """The estimator from the nominal camera (`nominal_camera`) and the measurements only
-    (`AdaptiveStructureEstimator.from_nominal`): each unknown feature guessed on its
+    (`StaticPointsEstimator.from_nominal`): each unknown feature guessed on its
     nominal ray at the median depth of the known features (2-9 cm off here), the gains
     derived from the scene's scale for the step `dt` (`None`: the sample interval);
     `gains` overrides any of them."""
     A0, R_c0, x_c0 = nominal_camera()
-    return AdaptiveStructureEstimator.from_nominal(
+    return StaticPointsEstimator.from_nominal(
         stream(sc), A0, R_c0, x_c0, dt=dt, gains=dict(DEFAULT_GAINS, **(gains or {}))
     )
 
 
 def stream(sc: UncalibratedScenario) -> Stream:
     """The estimator's stream of the scenario's measurements (platform pose, pixels)."""
-    return platform_stream(sc.ts, sc.R_b, sc.x_b, sc.p_s, sc.p_c, sc.omega_c)
+    return static_points_stream(sc.ts, sc.R_b, sc.x_b, sc.p_s, sc.p_c, sc.omega_c)
 
 
 def euclidean_experiment(

@@ -259,7 +259,7 @@ def circling_camera_scene(duration: float = 20.0) -> MovingPointScene:
 
 def sideways_camera_record(duration: float = 20.0, seed: int = 0, noise_px: float = 0.1) -> dict:
     """`sideways_camera_scene` as the arrays of a structure data file: the keys of
-    `visjax.io.StructureData`. Frames at 50 Hz with Gaussian pixel noise `noise_px` (from
+    `visjax.io.MovingPointData`. Frames at 50 Hz with Gaussian pixel noise `noise_px` (from
     `jax.random.key(seed)`), the camera's velocity at 200 Hz, the target's direction of
     motion in the image `D = [0, 1, 0]`, a depth guess of 4 m, and the truth (the target's
     position in the camera frame) at the frames."""
@@ -450,7 +450,7 @@ def tilted_platform_record(
     duration: float = 40.0, seed: int = 0, noise_px: float = 0.2, dropout: float = 0.02
 ) -> dict:
     """The scene of `tilted_platform_scene` logged at 200 Hz, as the arrays of a euclidean
-    data file: the keys of `visjax.io.EuclideanData`. The true camera is built with
+    data file: the keys of `visjax.io.StaticPointsData`. The true camera is built with
     `intrinsics(900.0, cx=524.0, cy=371.0, skew_angle_deg=91.5)` and a 1024 x 768 image;
     Gaussian pixel noise `noise_px` and a fraction `dropout` of the observations missing,
     drawn from `jax.random.key(seed)`; the nominal camera as in `tilted_platform_scene`

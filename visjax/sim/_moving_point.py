@@ -70,7 +70,7 @@ def moving_point_scene(
     - `K_c` (3, 3): the intrinsic matrix, $p = K_c [X/Z, Y/Z, 1]$.
     - `image_size`: optional `(width, height)` in pixels; a point whose pixels fall outside
         $[0, w] \\times [0, h]$ is reported by `in_view` and its pixels are NaN (dropped,
-        not reported: `visjax.estimators.moving_camera_stream(..., dropped="hold")`
+        not reported: `visjax.estimators.moving_point_stream(..., dropped="hold")`
         holds the last frame).
 
     **Returns:** a `MovingPointScene`.
