@@ -89,7 +89,7 @@ def test_a_failing_command_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
         (Path(out) / "summary.json").write_text("{}")
         raise RuntimeError("the simulation failed")
 
-    monkeypatch.setattr(report, "euclidean_report", half_written)
+    monkeypatch.setattr(report, "static_points_report", half_written)
     out = tmp_path / "out"
     assert main(["euclidean", "--out", str(out)]) == 1
     err = capsys.readouterr().err
@@ -192,6 +192,9 @@ def test_one_option_vocabulary_and_version(capsys):
         assert parser.parse_args([*argv, "--data", "x.npz"]).data == "x.npz"
     # the old name of euclidean's noise option still works
     assert parser.parse_args(["euclidean", "--noise-px", "0.2"]).noise == 0.2
+    # the commands' names before version 0.3 are aliases of the problems' names
+    assert parser.parse_args(["euclidean"]).command == "static_points"
+    assert parser.parse_args(["structure"]).command == "moving_point"
     with pytest.raises(SystemExit):
         main(["velocity", "--format", "png,jpeg"])
     assert "png, pdf, svg" in capsys.readouterr().err
@@ -280,7 +283,7 @@ def test_structure_and_euclidean_on_data_files(tmp_path, capsys):
 
     path = structure_example(duration=6.0, noise_px=0.0).save(tmp_path / "s.npz")
     out = tmp_path / "s"
-    assert main(["structure", "--data", str(path), "--quiet", "--out", str(out)]) == 0
+    assert main(["moving_point", "--data", str(path), "--quiet", "--out", str(out)]) == 0
     summary = _summary(out)
     assert summary["result"] == "successful" and len(summary["rms_last_half"]) == 3
     # depth guess 4 m for a target 2.5 m away; 3-6 s: within 1 cm (4 mm measured)

@@ -13,7 +13,7 @@ import pytest
 from visjax.cli import main
 from visjax.io import read_summary
 
-SMALL = ["structure", "--set", "I.1", "--duration", "2", "--seeds", "1", "--noise", "0.5"]
+SMALL = ["moving_point", "--set", "I.1", "--duration", "2", "--seeds", "1", "--noise", "0.5"]
 
 
 def _strict_json(path):

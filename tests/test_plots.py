@@ -408,20 +408,6 @@ def test_geometry_degrees_and_relative_errors_on_separate_axes():
         plt.close(fig)
 
 
-def test_titles_name_the_authors_not_the_seed_number():
-    for raw, authors in (
-        ("seed 000, section 6: 1000 Hz", "Chitrakaran et al."),
-        ("seed 003, set I.1 (static point)", "Jang's thesis"),
-        ("seed 004: adaptive LS structure", "Nath et al."),
-    ):
-        fig = _tune(title=raw)
-        try:
-            text = fig.get_suptitle()
-            assert authors in text and "seed 00" not in text
-        finally:
-            plt.close(fig)
-
-
 def test_unit_in_parentheses_becomes_brackets():
     assert plots._unit_label("worst-axis RMS, last half (m/s, rad/s)") == (
         "worst-axis RMS, last half [m/s, rad/s]"

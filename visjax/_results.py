@@ -61,6 +61,11 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "bounded state, a positive depth estimate, a scale away from zero); "
         "`Solution.failed_sample` is the sample held when it happened."
     )
+    depth_recovery_failed = (
+        "The reference depth z1* could not be recovered (Chitrakaran et al., section 5): the "
+        "premise R* s1 = d* w does not hold, the two features of the known length coincide "
+        "in the image, or the depth is not positive."
+    )
     invalid_settings = (
         "The estimator's gains or constants break an assumption of its paper (a gain that "
         "must be positive, a bound that must be ordered, a matrix that must be Hurwitz)."

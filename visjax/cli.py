@@ -151,12 +151,16 @@ def build_parser() -> argparse.ArgumentParser:
     _arg(v, "--filter-hz", _positive, None, "with --data: a causal 2nd-order low-pass")
     _common(v, _OUT, 0.0, _FIRST, _SEEDS, _OWN_DATA)
 
-    st = sub.add_parser("structure", help="Jang's unknown input observer, or your data")
+    help = "Jang's unknown input observer on a moving point, or your data"
+    st = sub.add_parser("moving_point", aliases=["structure"], help=help)
+    st.set_defaults(command="moving_point")
     _arg(st, "--set", None, None, "I.1 ... II.3 (repeatable; default: all)", action="append")
     _arg(st, "--duration", _positive, 30.0, "seconds per set (default 30)")
     _common(st, _OUT, 0.1, _FIRST, _SEEDS, _OWN_DATA)
 
-    eu = sub.add_parser("euclidean", help="Nath et al.'s uncalibrated structure, or your data")
+    help = "Nath et al.'s static points from an uncalibrated camera, or your data"
+    eu = sub.add_parser("static_points", aliases=["euclidean"], help=help)
+    eu.set_defaults(command="static_points")
     _arg(eu, "--duration", _positive, 30.0, "seconds (default 30)")
     _common(eu, _OUT, 0.0, _FIRST, _SEEDS, _OWN_DATA)
     # --noise-px: the option's name before version 0.3, kept so that old scripts run
@@ -221,12 +225,12 @@ def _call(a):
 
 def _check(a) -> None:
     """Combinations argparse cannot see, and a verb's problem, variants and options."""
-    if a.command == "structure":
+    if a.command == "moving_point":
         for name in a.set or ():
             _set_name(name)
-    if a.command in ("velocity", "euclidean") and a.duration * getattr(a, "rate", 1e3) < 2:
+    if a.command in ("velocity", "static_points") and a.duration * getattr(a, "rate", 1e3) < 2:
         raise argparse.ArgumentTypeError("--duration times the rate must give at least 2 samples")
-    if a.command in ("velocity", "structure", "euclidean") and a.seeds > 1:
+    if a.command in ("velocity", "moving_point", "static_points") and a.seeds > 1:
         if a.data is not None:
             raise argparse.ArgumentTypeError(
                 "--seeds applies to the paper's simulation, not to --data"

@@ -101,7 +101,7 @@ def velocity_data_report(path, out=None, quiet=False, filter_hz=None, formats=("
     )
 
 
-def structure_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
+def moving_point_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
     """The unknown input observer of Jang's thesis on a user's `visjax.io.MovingPointData`
     file (`papers.moving_point_file_reproduction`): `summary.json` (kind
     `structure_data`), `estimate.npz` and `structure.<format>`."""
@@ -116,7 +116,7 @@ def structure_data_report(path, out=None, quiet=False, formats=("png",)) -> dict
     )
 
 
-def euclidean_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
+def static_points_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
     """The adaptive structure estimator of Nath et al. on a user's
     `visjax.io.StaticPointsData` file (`papers.static_points_file_reproduction`):
     `summary.json` (kind `euclidean_data`), `estimate.npz` and `euclidean.<format>`."""
@@ -131,7 +131,7 @@ def euclidean_data_report(path, out=None, quiet=False, formats=("png",)) -> dict
     )
 
 
-def structure_report(
+def moving_point_report(
     sets=None, duration=30.0, noise=0.1, seed=0, out=None, quiet=False, formats=("png",), seeds=1
 ) -> dict:
     """Jang's thesis (`papers.jang.structure_reproduction`): the UIO on the simulated
@@ -152,7 +152,7 @@ def structure_report(
     )
 
 
-def euclidean_report(
+def static_points_report(
     duration=30.0, noise=0.0, seed=0, out=None, quiet=False, formats=("png",), seeds=1
 ) -> dict:
     """Nath et al. (`papers.nath.euclidean_reproduction`): the adaptive least-squares
@@ -316,11 +316,11 @@ def reproduce(out="results", quick: bool = False, quiet: bool = False, formats=(
         scenes=q["geometry_scenes"], out=out / "geometry", quiet=quiet, formats=formats
     )
     print("\n== Jang's thesis: the unknown input observer on the seven sets (simulated) ==")
-    r["structure"] = structure_report(
+    r["structure"] = moving_point_report(
         duration=q["structure_duration_s"], out=out / "structure", quiet=quiet, formats=formats
     )
     print("\n== Nath et al.: Euclidean structure from an uncalibrated moving camera ==")
-    r["euclidean"] = euclidean_report(
+    r["euclidean"] = static_points_report(
         duration=q["euclidean_duration_s"], out=out / "euclidean", quiet=quiet, formats=formats
     )
     print("\n== Jang's thesis, chapters 4-5: the testbed twin (PUMA 560, rendered video, KLT) ==")

@@ -189,7 +189,9 @@ def test_nan_pixels_become_a_mask(project):
     assert all(np.all(np.isfinite(leaf)) for leaf in jax.tree_util.tree_leaves(y))
     x_b = np.asarray(sc.x_b).copy()
     x_b[4, 0] = np.nan
-    stream = static_points_stream(sc.ts, sc.R_b, x_b, p_s, p_c, sc.omega_c)
+    with pytest.raises(RuntimeError, match="static_points_stream: sample 4"):
+        static_points_stream(sc.ts, sc.R_b, x_b, p_s, p_c, sc.omega_c)
+    stream = static_points_stream(sc.ts, sc.R_b, x_b, p_s, p_c, sc.omega_c, throw=False)
     with pytest.raises(RuntimeError, match="measurement sample is not finite"):
         run(est, stream, saveat=SAVE)
 

@@ -53,16 +53,9 @@ def test_jit_vmap_grad():
     # z1* is linear in L: dz1*/dL = z1*/L exactly
     g = jax.grad(lambda l: depth_from_feature_length(P[0], A[0], N[0], (1, 3, l)))(L[0])
     np.testing.assert_allclose(g, scenes[0][0][0, 2] / L[0], rtol=1e-9)
-    # throw=False: the same values and gradient where it succeeds, NaN (no error) where not
-    quiet = jax.jit(
-        jax.vmap(lambda p, a, n, l: depth_from_feature_length(p, a, n, (1, 3, l), throw=False))
-    )
-    np.testing.assert_allclose(quiet(P, A, N, L), f(P, A, N, L), rtol=1e-15)
-    assert np.all(np.isnan(np.asarray(quiet(P, A, N, -L))))  # L <= 0: z1* <= 0
-    g_quiet = jax.grad(
-        lambda l: depth_from_feature_length(P[0], A[0], N[0], (1, 3, l), throw=False)
-    )(L[0])
-    np.testing.assert_allclose(g_quiet, g, rtol=1e-15)
+    # L <= 0: z1* <= 0 raises, also under vmap
+    with pytest.raises((RuntimeError, ValueError), match="z1\\* <= 0"):
+        f(P, A, N, -L)
 
 
 def test_bad_known_length(no_jaxtyping):
@@ -154,9 +147,9 @@ def test_velocity_in_the_object_frame():
 def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
     """0.1 px of noise on 2 s of frames: the plane normal measured from them is ~1.7 deg off,
     so the default depth path (the object origin's pixel) breaks its premise check. It
-    raises by default; with `throw=False` z1* is NaN, every frame's result names the bad
-    parameter and `run` stops at the first sample, also inside `vmap`; the known length
-    between two features recovers z1* from the same frames."""
+    raises by default; with `throw=False` the camera's result is `depth_recovery_failed`,
+    every frame's result says so and `run` stops at the first sample, also inside `vmap`;
+    the known length between two features recovers z1* from the same frames."""
     from visjax import RESULTS
     from visjax.estimators import SaveAt, VelocityEstimator, run
 
@@ -167,9 +160,10 @@ def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
     with pytest.raises(RuntimeError, match="R\\* s1 = d\\* w does not hold"):
         fixed_camera(*args)
     camera = fixed_camera(*args, throw=False)
-    stream, z1 = velocity_stream(sc.ts, noisy, camera, throw=False), camera.z1_star
-    assert np.isnan(float(z1))
-    assert stream.measurement(5).result == RESULTS.invalid_intrinsics
+    stream = velocity_stream(sc.ts, noisy, camera, throw=False)
+    assert camera.result == RESULTS.depth_recovery_failed
+    assert stream.measurement(5).result == RESULTS.depth_recovery_failed
+    assert np.all(np.isnan(np.asarray(stream.measurement(5).J)))
     est = VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63)
     sol = run(est, stream, saveat=SaveAt(outputs=False), throw=False)
     assert sol.result == RESULTS.nonfinite_measurement and int(sol.failed_sample) == 0
@@ -178,11 +172,11 @@ def test_a_failed_depth_recovery_is_a_result_code_with_throw_false():
         pixels = sc.pixels + 0.1 * jax.random.normal(key, sc.pixels.shape)
         camera = fixed_camera(pixels, sc.A, sc.R_star, sc.s[0], throw=False)
         s = velocity_stream(sc.ts, pixels, camera, throw=False)
-        z = camera.z1_star
+        z = camera.result._value
         return run(est, s, saveat=SaveAt(outputs=False), throw=False).result._value, z
 
-    codes, zs = jax.vmap(one)(keys)
-    assert np.all(np.isnan(np.asarray(zs)))
+    codes, camera_codes = jax.vmap(one)(keys)
+    assert np.all(np.asarray(camera_codes) == RESULTS.depth_recovery_failed._value)
     assert np.all(np.asarray(codes) == RESULTS.nonfinite_measurement._value)
     # the paper's premise, a known length (features 1 and 3: the square's diagonal)
     length = float(jnp.linalg.norm(sc.s[0] - sc.s[2]))

@@ -42,29 +42,44 @@ def test_velocity_stream(bad):
         velocity_stream(sc.ts, pixels, camera)
 
 
-def test_moving_camera_stream_at_the_camera_rate():
+def test_moving_point_stream_at_the_camera_rate():
     sc = jang.scenario("II.1", 1.0)
     pixels = np.asarray(sc.frame_pixels).copy()
     velocities = np.asarray(sc.frame_velocities).copy()
     pixels[12, 0] = np.nan
-    stream = moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
+    stream = moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer, throw=False)
     _assert_stops_at(jang.observer("II.1"), stream, 12, dt=1e-3)
+    with pytest.raises(RuntimeError, match=r"moving_point_stream: sample 12 \(t = 0.4 s\)"):
+        moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
     velocities[12, 5] = np.nan
     pixels[12, 0] = 300.0
-    stream = moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
+    stream = moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer, throw=False)
     _assert_stops_at(jang.observer("II.1"), stream, 12, dt=1e-3)
+    with pytest.raises(RuntimeError, match="sample 12"):
+        moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer)
+    # held over, the dropped frame is no longer a failure
+    pixels[12, 0] = np.nan
+    velocities[12, 5] = 0.0
+    moving_point_stream(sc.frame_ts, pixels, velocities, sc.Kc_observer, dropped="hold")
 
 
-def test_platform_stream():
+def test_static_points_stream():
     sc = nath.scenario(0.05)
     p_s = np.asarray(sc.p_s).copy()
     p_s[23, 1, 0] = np.inf  # a NaN pixel is a missing feature (masked), an infinite one is bad
-    stream = static_points_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
+    stream = static_points_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c, throw=False)
     _assert_stops_at(nath.initial_estimator(sc), stream, 23)
+    with pytest.raises(RuntimeError, match="static_points_stream: sample 23"):
+        static_points_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
     x_b = np.asarray(sc.x_b).copy()
     x_b[31, 2] = np.inf
-    stream = static_points_stream(sc.ts, sc.R_b, x_b, sc.p_s, sc.p_c, sc.omega_c)
+    stream = static_points_stream(sc.ts, sc.R_b, x_b, sc.p_s, sc.p_c, sc.omega_c, throw=False)
     _assert_stops_at(nath.initial_estimator(sc), stream, 31)
+    with pytest.raises(RuntimeError, match="sample 31"):
+        static_points_stream(sc.ts, sc.R_b, x_b, sc.p_s, sc.p_c, sc.omega_c)
+    # a NaN pixel is a feature not seen: no failure
+    p_s[23, 1, 0] = np.nan
+    static_points_stream(sc.ts, sc.R_b, sc.x_b, p_s, sc.p_c, sc.omega_c)
 
 
 def test_a_stream_built_inside_jit_keeps_its_times_for_dt():

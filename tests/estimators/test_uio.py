@@ -196,11 +196,13 @@ def test_D_as_a_vector_and_the_new_fields_defaults():
     for name, shape in (("D2", (2,)), ("A_u", (3, 3)), ("K_u", (6, 2, 3)), ("P", (3,))):
         with pytest.raises(ValueError, match=f"`{name}` must have shape"):
             MovingPointObserver(**fields, **{name: np.zeros(shape)})
-    # a dropped first frame has nothing to hold: the run still stops at sample 0
+    # a dropped first frame has nothing to hold: the builder raises, or the run still
+    # stops at sample 0
     pixels = np.asarray(sc.frame_pixels).copy()
     pixels[0, 1] = np.nan
-    stream = moving_point_stream(
-        sc.frame_ts, pixels, sc.frame_velocities, sc.Kc_observer, dropped="hold"
-    )
+    args = (sc.frame_ts, pixels, sc.frame_velocities, sc.Kc_observer)
+    with pytest.raises(RuntimeError, match="sample 0"):
+        moving_point_stream(*args, dropped="hold")
+    stream = moving_point_stream(*args, dropped="hold", throw=False)
     out = run(col, stream, dt=1e-3, saveat=SaveAt(outputs=False), throw=False)
     assert out.result == RESULTS.nonfinite_measurement and int(out.failed_sample) == 0

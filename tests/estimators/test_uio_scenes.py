@@ -80,9 +80,12 @@ def test_dropped_frames(sideways):
     frames = slice(0, None, 20)
     pixels = jnp.where(jnp.asarray(drop)[:, None], jnp.nan, truth.pixels[frames])
     ts, u = truth.ts[frames], truth.camera_velocity[frames]
+    first = int(np.flatnonzero(drop)[0])
+    with pytest.raises(RuntimeError, match=f"moving_point_stream: sample {first} "):
+        moving_point_stream(ts, pixels, u, S.K_C)
     out = run(
         obs,
-        moving_point_stream(ts, pixels, u, S.K_C),
+        moving_point_stream(ts, pixels, u, S.K_C, throw=False),
         dt=1e-3,
         saveat=SaveAt(outputs=False),
         throw=False,

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from tests.helpers import central_difference
-from visjax.estimators import depth_from_known_length, diagonal_intersection, kinematics_jacobian
+from visjax import RESULTS
+from visjax.estimators import (
+    depth_from_known_length,
+    diagonal_intersection,
+    fixed_camera,
+    kinematics_jacobian,
+)
 from visjax.papers.chitrakaran import section6_scenario as fixed_camera_scenario
 
 
@@ -25,20 +31,20 @@ def test_depth_and_diagonal_jit_vmap_grad():
     for i, p in enumerate(sc.pixels[::50]):
         np.testing.assert_allclose(batched[i], diagonal_intersection(p), rtol=1e-14)
 
-    # throw=False: the same value and gradient where the premise holds; NaN where not (an
-    # origin pixel off the object origin), under vmap, no error
-    def quiet(p_ref, shift):
-        p0 = diagonal_intersection(p_ref) + shift
-        return depth_from_known_length(
-            p_ref[0], p0, sc.A, sc.n_star, sc.R_star, sc.s[0], throw=False
-        )
+    # fixed_camera(throw=False): the same value where the premise holds, a result code
+    # where not (an origin pixel off the object origin), under vmap, no error
+    def quiet(shift):
+        camera = fixed_camera(
+            sc.pixels[:2], sc.A, sc.R_star, sc.s[0], n_star=sc.n_star,
+            origin_pixel=diagonal_intersection(p_ref) + shift, throw=False,
+        )  # fmt: skip
+        return camera.z1_star, camera.result._value
 
-    zero = np.zeros(2)
-    np.testing.assert_allclose(jax.grad(quiet)(p_ref, zero), g, rtol=1e-12, atol=1e-15)
     shifts = np.array([[0.0, 0.0], [40.0, -25.0]])
-    z = jax.jit(jax.vmap(quiet, (None, 0)))(p_ref, shifts)
+    z, codes = jax.jit(jax.vmap(quiet))(shifts)
     np.testing.assert_allclose(z[0], sc.z1_star, rtol=1e-10)
-    assert np.isnan(float(z[1]))
+    assert codes[0] == RESULTS.successful._value
+    assert codes[1] == RESULTS.depth_recovery_failed._value
 
 
 def test_kinematics_jacobian_grad():

@@ -17,10 +17,10 @@ from visjax.geometry import (
     known_feature_regressors,
     pixel_to_normalized,
     project,
-    project_checked,
     so3_exp,
     so3_log,
 )
+from visjax.geometry._camera import _project_checked
 from visjax.sim import random_planar_scenes
 
 recon = jax.jit(jax.vmap(lambda a, b, c: euclidean_reconstruction(a, b, c, throw=False)))
@@ -79,7 +79,7 @@ def test_projection_with_unusable_intrinsics():
     for bad in (np.nan, 0.0):
         Ab = A.copy()
         Ab[0, 0] = bad
-        pixels, result = project_checked(X, Ab)
+        pixels, result = _project_checked(X, Ab)
         assert result == RESULTS.invalid_intrinsics and np.all(np.isnan(pixels))
         with pytest.raises(RuntimeError, match="intrinsic matrix"):
             project(X, Ab)
@@ -119,15 +119,15 @@ def test_shapes_that_were_accepted_silently(no_jaxtyping):
 def test_g33_zero_is_named_and_large_pixels_are_not():
     """A homography whose g33 is 0 (the image origin maps to infinity) gets `g33_zero`; a
     pure translation of pixels near 4e5 does not (judged at the data's scale)."""
-    from visjax.geometry import find_homography_checked
+    from visjax.geometry._homography import _find_homography_checked
 
     G0 = np.array([[2.0, 0.1, 5.0], [0.2, 1.0, 3.0], [1e-3, 2e-3, 0.0]])
     p_ref = np.array([[100.0, 50.0], [300.0, 60.0], [320.0, 240.0], [90.0, 250.0]])
     h = np.c_[p_ref, np.ones(4)] @ G0.T
-    G, result = find_homography_checked(p_ref, h[:, :2] / h[:, 2:])
+    G, result = _find_homography_checked(p_ref, h[:, :2] / h[:, 2:])
     assert result == RESULTS.g33_zero and np.all(np.isnan(G))
     big = 4e5 + p_ref
-    G, result = find_homography_checked(big, big + np.array([5.0, -3.0]))
+    G, result = _find_homography_checked(big, big + np.array([5.0, -3.0]))
     assert result == RESULTS.successful
     np.testing.assert_allclose(G[:2, 2], [5.0, -3.0], rtol=1e-6)
 

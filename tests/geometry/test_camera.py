@@ -11,9 +11,9 @@ from visjax.geometry import (
     normalized_to_pixel,
     pixel_to_normalized,
     project,
-    project_checked,
     to_homogeneous,
 )
+from visjax.geometry._camera import _project_checked
 
 # The camera of Chitrakaran et al., eq. (62).
 A62 = np.array([[1268.16, 0.0, 257.49], [0.0, 1267.50, 253.10], [0.0, 0.0, 1.0]])
@@ -64,10 +64,10 @@ def test_project_behind_camera():
     X = np.array([[0.1, 0.2, 1.0], [0.0, 0.1, -0.5]])
     with pytest.raises(RuntimeError, match="behind the camera"):
         jax.jit(project)(X, A62)
-    pixels, result = project_checked(X, A62)
+    pixels, result = _project_checked(X, A62)
     assert result == RESULTS.behind_camera
     assert np.all(np.isfinite(pixels[0])) and np.all(np.isnan(pixels[1]))
-    _, result = project_checked(X[:1], A62)
+    _, result = _project_checked(X[:1], A62)
     assert result == RESULTS.successful
     with pytest.raises(RuntimeError, match="not finite"):
         project(np.array([[np.nan, 0.0, 1.0]]), A62)

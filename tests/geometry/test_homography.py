@@ -9,9 +9,9 @@ from visjax.geometry import (
     alpha_g33,
     euclidean_homography,
     find_homography,
-    find_homography_checked,
     projective_homography,
 )
+from visjax.geometry._homography import _find_homography_checked
 from visjax.sim import random_planar_scenes
 
 find_j = jax.jit(find_homography)
@@ -116,9 +116,9 @@ def test_collinear_coincident_and_nonfinite_points():
     bad[1, 0] = np.nan
     with pytest.raises(RuntimeError, match="not finite"):
         find_j(p_ref, bad)
-    G, result = find_homography_checked(p_ref, bad)
+    G, result = _find_homography_checked(p_ref, bad)
     assert result == RESULTS.nonfinite_pixels and np.all(np.isnan(G))
-    G, result = find_homography_checked(collinear, p_cur)
+    G, result = _find_homography_checked(collinear, p_cur)
     assert result == RESULTS.degenerate_points and np.all(np.isnan(G))
 
 

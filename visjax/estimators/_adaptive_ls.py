@@ -51,7 +51,7 @@ from ..geometry import (
     to_homogeneous,
     unknown_feature_regressors,
 )
-from ._base import AbstractJumpEstimator, Stream
+from ._base import AbstractJumpEstimator, Stream, checked_samples
 
 
 @final
@@ -130,21 +130,24 @@ def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
     )
 
 
-def static_points_stream(ts, R_b, x_b, p_s, p_c, omega_c, *, truth=None) -> Stream:
+def static_points_stream(ts, R_b, x_b, p_s, p_c, omega_c, *, truth=None, throw=True) -> Stream:
     """The measurement `Stream` of `StaticPointsEstimator` from raw measurements.
 
     **Arguments:** `ts` (N,) the sample times (any rate; `run(..., dt=...)` holds the
     samples); the measured platform pose `R_b` (N, 3, 3), `x_b` (N, 3) in the world frame;
     the pixels of the unknown (`p_s`, (N, n, 2)) and known (`p_c`, (N, m, 2)) features, NaN
     where a feature was not seen (`platform_measurements`); the known features' world
-    positions `omega_c` (m, 3); `truth` for a reducer.
+    positions `omega_c` (m, 3); `truth` for a reducer. `throw`: a sample that is not finite
+    once the features not seen are masked (a NaN or infinite pose, an infinite pixel)
+    raises here, naming the sample; with `throw=False` `run` stops there with
+    `RESULTS.nonfinite_measurement`.
     """
     ts = as_float(ts)
     check_shape(ts, (None,), "ts")
     ys = platform_measurements(R_b, x_b, p_s, p_c, omega_c)
     if ys.p_s.shape[0] != ts.shape[0]:
         raise ValueError(f"`ts` has {ts.shape[0]} samples but the pixels have {ys.p_s.shape[0]}.")
-    return Stream(ts=ts, ys=ys, truth=truth)
+    return checked_samples(Stream(ts=ts, ys=ys, truth=truth), "static_points_stream", throw)
 
 
 def _ls_step_bound(rate, alpha, depth, amplification=1e3, steps=512):

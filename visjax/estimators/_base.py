@@ -157,6 +157,37 @@ class Stream(eqx.Module):
         return Stream(ts=self.ts, ys=ys, truth=self.truth, present=self.present)
 
 
+def checked_samples(stream: Stream, builder: str, throw: bool) -> Stream:
+    """A stream builder's `throw=True`: raise if a present sample of `stream.ys` is not
+    finite (naming the first such sample when the samples are concrete), else return the
+    stream unchanged. With `throw=False` nothing is checked here and `run` stops at that
+    sample with `RESULTS.nonfinite_measurement`. (A missing value a builder fills or masks,
+    e.g. a NaN pixel of a feature out of view, is finite by the time it is checked.)"""
+    if not throw:
+        return stream
+    ok = jax.vmap(all_finite)(stream.ys)
+    if stream.present is not None:
+        ok = ok | ~stream.present
+    bad = ~ok
+    if isinstance(bad, jax.core.Tracer):
+        where = "a sample"
+    else:
+        flagged = np.flatnonzero(np.asarray(bad))
+        if flagged.size == 0:
+            return stream
+        k = int(flagged[0])
+        where = f"sample {k} (t = {float(stream.ts[k]):g} s)"
+    # the check rides on a measurement (the times stay concrete for `run`'s step)
+    first = jax.tree_util.tree_leaves(stream.ys)[0]
+    checked = eqx.error_if(
+        first,
+        jnp.any(bad),
+        f"{builder}: {where} is not finite (a NaN or inf measurement); "
+        "with throw=False the run stops there with `nonfinite_measurement`.",
+    )
+    return eqx.tree_at(lambda s: jax.tree_util.tree_leaves(s.ys)[0], stream, checked)
+
+
 @final
 class SaveAt(eqx.Module):
     """What `run` saves, and how often (a Module: a new value of a window never recompiles).

@@ -25,7 +25,7 @@ from .._results import all_finite
 from .._util import as_float, check_shape, positive_finite
 from ..geometry import pixel_to_normalized
 from ..kinematics import camera_term, known_input_term
-from ._base import AbstractEstimator, Stream
+from ._base import AbstractEstimator, Stream, checked_samples
 
 C_OUTPUT = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # y = C x, eq. (3.1)
 
@@ -383,6 +383,7 @@ def moving_point_stream(
     *,
     truth=None,
     dropped: str = "stop",
+    throw: bool = True,
 ) -> Stream:
     """The measurement `Stream` of the UIO from raw measurements.
 
@@ -407,6 +408,9 @@ def moving_point_stream(
         fast camera and a large scheduled depth gain this costs accuracy
         (`benchmarks/scenes_uio.py`: with 5% of the 50 Hz frames dropped, the sideways
         scene's depth RMS goes from 2.3 mm to 12.8 mm held, 2.2 mm extrapolated).
+    - `throw`: a sample that is still not finite (a dropped frame with `dropped="stop"`, a
+        dropped first frame, a non-finite camera velocity) raises here, naming the sample;
+        with `throw=False` `run` stops there with `RESULTS.nonfinite_measurement`.
     """
     ts, pixels, velocities, K_c = (as_float(x) for x in (ts, pixels, velocities, K_c))
     check_shape(ts, (None,), "ts")
@@ -432,4 +436,5 @@ def moving_point_stream(
             ahead = (ts - ts[last])[:, None]
             pixels = jnp.where(seen[:, None], pixels, held + ahead * slope)
     y = pixel_to_normalized(pixels, K_c)
-    return Stream(ts=ts, ys=MovingCameraMeasurement(y=y, u=velocities), truth=truth)
+    stream = Stream(ts=ts, ys=MovingCameraMeasurement(y=y, u=velocities), truth=truth)
+    return checked_samples(stream, "moving_point_stream", throw)

@@ -133,8 +133,10 @@ class FixedCamera(eqx.Module):
     intrinsic matrix; `R_star` (3, 3) the known reference orientation of the object; `s1`
     (3,) feature 1 in the object frame; `n_star` (3,) the plane normal in the reference
     camera frame (`plane_normal_from_frames`); `z1_star` () feature 1's reference depth
-    (`depth_from_known_length`, `depth_from_feature_length`). `fixed_camera` measures
-    `n_star` and `z1_star` from the frames; all are arrays (a new value never recompiles,
+    (`depth_from_known_length`, `depth_from_feature_length`); `result` whether they were
+    recovered (`fixed_camera(throw=False)`: `RESULTS.depth_recovery_failed` when $z_1^*$
+    could not be). `fixed_camera` measures `n_star` and `z1_star` from the frames; all are
+    arrays (a new value never recompiles,
     and gradients flow through them).
     """
 
@@ -144,6 +146,7 @@ class FixedCamera(eqx.Module):
     s1: Float[Array, "3"] = eqx.field(converter=as_float)
     n_star: Float[Array, "3"] = eqx.field(converter=as_float)
     z1_star: Float[Array, ""] = eqx.field(converter=as_float)
+    result: RESULTS = eqx.field(default_factory=lambda: RESULTS.successful)
 
     def __check_init__(self):
         if self.p_ref.ndim != 2 or self.p_ref.shape[-1] != 2 or self.p_ref.shape[0] < 4:
@@ -209,6 +212,7 @@ def velocity_measurements(
     # recovery that failed, with throw=False) is a bad parameter, not a bad frame
     z1_ok = jnp.isfinite(z1_star) & (z1_star > 0.0)
     result = RESULTS.where(z1_ok, result, RESULTS.invalid_intrinsics)
+    result = RESULTS.where(camera.result == RESULTS.successful, result, camera.result)
     # once per frame (a barrier: XLA would recompute it into each of the 90 entries below)
     bad = jax.lax.optimization_barrier(result != RESULTS.successful)
     J, J_inv = (from_rows(M, A.dtype) for M in (J, J_inv))
@@ -226,7 +230,6 @@ def depth_from_known_length(
     s1: Float[ArrayLike, "3"],
     *,
     residual_tol: float = 1e-2,
-    throw: bool = True,
 ) -> Float[Array, ""]:
     """The reference depth $z_1^*$ of feature 1 from the known vector $s_1$ (replaces eq. (56)).
 
@@ -259,14 +262,26 @@ def depth_from_known_length(
         the true $n^*$, but a normal measured from a few seconds of noisy frames can be a
         degree or two off, which leaves a few 1e-2: then give the known length between two
         features, `depth_from_feature_length`). Above it the premise does not hold and the
-        function raises instead of returning a wrong $z_1^*$.
-    - `throw`: with `False`, a failure returns NaN instead of raising (every frame of a
-        stream built from it then has the result `RESULTS.invalid_intrinsics`, and `run`
-        stops at its first sample).
+        function raises instead of returning a wrong $z_1^*$. (`fixed_camera(throw=False)`
+        returns the failure as the camera's `result` instead.)
 
-    **Returns:** $z_1^*$ (a runtime error, or NaN, if it is not positive or the residual is
-    too large).
+    **Returns:** $z_1^*$ (a runtime error if it is not positive or the residual is too
+    large).
     """
+    z1, premise = _depth_from_known_length(p1_ref, p0_ref, A, n_star, R_star, s1, residual_tol)
+    z1 = eqx.error_if(
+        z1,
+        ~premise,
+        "depth recovery: R* s1 = d* w does not hold (relative residual above `residual_tol`):"
+        " `p0_ref` is not the image of the object origin on the feature plane (for"
+        " `diagonal_intersection`, the features must be a parallelogram centred on it), or"
+        " n* is too coarse (from noisy frames: give `known_length` instead).",
+    )
+    return eqx.error_if(z1, ~(z1 > 0.0), "depth recovery gave z1* <= 0: check s1, R*, n*.")
+
+
+def _depth_from_known_length(p1_ref, p0_ref, A, n_star, R_star, s1, residual_tol):
+    """`depth_from_known_length`'s $z_1^*$ and whether its premise holds."""
     p1_ref, p0_ref, A, n_star, R_star, s1 = (
         as_float(x) for x in (p1_ref, p0_ref, A, n_star, R_star, s1)
     )
@@ -285,18 +300,7 @@ def depth_from_known_length(
     # R* s1 = d* w is three equations for one unknown: their residual says whether the
     # premise holds (the origin's pixel is the image of the object origin, on the plane)
     residual = jnp.linalg.norm(Rs1 - d_star * w) / jnp.linalg.norm(Rs1)
-    premise = residual <= residual_tol
-    if not throw:
-        return jnp.where(premise & (z1 > 0.0), z1, jnp.nan)
-    z1 = eqx.error_if(
-        z1,
-        ~premise,
-        "depth recovery: R* s1 = d* w does not hold (relative residual above `residual_tol`):"
-        " `p0_ref` is not the image of the object origin on the feature plane (for"
-        " `diagonal_intersection`, the features must be a parallelogram centred on it), or"
-        " n* is too coarse (from noisy frames: give `known_length` instead).",
-    )
-    return eqx.error_if(z1, ~(z1 > 0.0), "depth recovery gave z1* <= 0: check s1, R*, n*.")
+    return z1, residual <= residual_tol
 
 
 def depth_from_feature_length(
@@ -304,8 +308,6 @@ def depth_from_feature_length(
     A: Float[ArrayLike, "3 3"],
     n_star: Float[ArrayLike, "3"],
     known_length: tuple,
-    *,
-    throw: bool = True,
 ) -> Float[Array, ""]:
     """The reference depth $z_1^*$ of feature 1 from one known length between two features.
 
@@ -327,13 +329,23 @@ def depth_from_feature_length(
         (`plane_normal_from_frames`, or known).
     - `known_length`: `(i, j, L)`: two feature indices (Python ints, 0 is feature 1) and
         their distance in metres (an array: gradients flow through it).
-    - `throw`: with `False`, a failure returns NaN instead of raising.
 
     **Returns:** $z_1^*$ (the sign of `n_star` does not matter: it is taken with
     $n^{*T} m_1^* > 0$, eq. (4)); a runtime error if the two features coincide in the
     image, or if the depth is not positive (a feature on the other side of the camera, or
-    $L \\le 0$).
+    $L \\le 0$). (`fixed_camera(throw=False)` returns a failure as the camera's `result`.)
     """
+    z1, gap_ok = _depth_from_feature_length(p_ref, A, n_star, known_length)
+    z1 = eqx.error_if(
+        z1,
+        ~gap_ok,
+        "depth_from_feature_length: the two features of the known length coincide.",
+    )
+    return eqx.error_if(z1, ~(z1 > 0.0), "depth_from_feature_length: z1* <= 0 (check n*, L > 0).")
+
+
+def _depth_from_feature_length(p_ref, A, n_star, known_length):
+    """`depth_from_feature_length`'s $z_1^*$ and whether the two features are apart."""
     p_ref = check_points(p_ref, "p_ref", min_points=2)
     A, n_star = as_float(A), as_float(n_star)
     check_shape(n_star, (3,), "n_star")
@@ -353,18 +365,8 @@ def depth_from_feature_length(
     u = jnp.where(u @ m[0] < 0.0, -u, u)  # the sign of eq. (4): d* = n*^T m_bar* > 0
     scaled = m / (m @ u)[:, None]  # m_k / (n^T m_k): the features at d* = 1
     gap = jnp.linalg.norm(scaled[i] - scaled[j])
-    if not throw:
-        gap_ok = gap > 0.0
-        z1 = (length / jnp.where(gap_ok, gap, 1.0)) / (u @ m[0])
-        return jnp.where(gap_ok & (z1 > 0.0), z1, jnp.nan)
-    gap = eqx.error_if(
-        gap,
-        ~(gap > 0.0),
-        "depth_from_feature_length: the two features of the known length coincide.",
-    )
-    d_star = length / gap
-    z1 = d_star / (u @ m[0])
-    return eqx.error_if(z1, ~(z1 > 0.0), "depth_from_feature_length: z1* <= 0 (check n*, L > 0).")
+    gap_ok = gap > 0.0
+    return (length / jnp.where(gap_ok, gap, 1.0)) / (u @ m[0]), gap_ok
 
 
 def paper_eq56_matrix(m1_star, m1, alpha1, n_star, x_h, R_bar) -> Float[Array, "3 3"]:
@@ -615,11 +617,11 @@ def fixed_camera(
     features).
 
     With `dropouts=True` a NaN pixel is a feature out of view (the reference pixels must all
-    be finite). With `throw=False` a depth recovery that fails (its premise broken, or a
-    plane normal too coarse from a few seconds of noisy frames: give `known_length` then)
-    makes $z_1^*$ NaN, and `velocity_stream` then marks every frame
-    `RESULTS.invalid_intrinsics`, so `run` stops at the first sample; with `throw=True` it
-    raises.
+    be finite). A depth recovery that fails (its premise broken, or a plane normal too
+    coarse from a few seconds of noisy frames: give `known_length` then) raises with
+    `throw=True`; with `throw=False` the camera's `result` is
+    `RESULTS.depth_recovery_failed`, every frame of a `velocity_stream` on it has that
+    result, and `run` stops at the first sample.
     """
     pixels = _check_frames(pixels)
     if reference_pixels is None:
@@ -643,15 +645,28 @@ def fixed_camera(
             )
     if n_star is None:
         n_star = plane_normal_from_frames(p_ref, pixels, A, n_prior, visible=visible)
+    result = RESULTS.successful
     if z1_star is None and known_length is not None:
-        z1_star = depth_from_feature_length(p_ref, A, n_star, known_length, throw=throw)
+        if throw:
+            z1_star = depth_from_feature_length(p_ref, A, n_star, known_length)
+        else:
+            z1_star, ok = _depth_from_feature_length(p_ref, A, n_star, known_length)
+            ok = ok & (z1_star > 0.0)
+            result = RESULTS.where(ok, result, RESULTS.depth_recovery_failed)
     if z1_star is None:
         if origin_pixel is None:
             origin_pixel = diagonal_intersection(p_ref)
-        z1_star = depth_from_known_length(
-            p_ref[0], origin_pixel, A, n_star, R_star, s1, throw=throw
-        )
-    return FixedCamera(p_ref=p_ref, A=A, R_star=R_star, s1=s1, n_star=n_star, z1_star=z1_star)
+        if throw:
+            z1_star = depth_from_known_length(p_ref[0], origin_pixel, A, n_star, R_star, s1)
+        else:
+            z1_star, ok = _depth_from_known_length(
+                p_ref[0], origin_pixel, A, n_star, R_star, s1, 1e-2
+            )
+            ok = ok & (z1_star > 0.0)
+            result = RESULTS.where(ok, result, RESULTS.depth_recovery_failed)
+    return FixedCamera(
+        p_ref=p_ref, A=A, R_star=R_star, s1=s1, n_star=n_star, z1_star=z1_star, result=result
+    )
 
 
 def velocity_stream(

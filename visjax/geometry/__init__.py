@@ -10,7 +10,6 @@ from ._camera import (
     normalized_to_pixel as normalized_to_pixel,
     pixel_to_normalized as pixel_to_normalized,
     project as project,
-    project_checked as project_checked,
     to_homogeneous as to_homogeneous,
 )
 from ._decomposition import (
@@ -22,7 +21,6 @@ from ._homography import (
     alpha_g33 as alpha_g33,
     euclidean_homography as euclidean_homography,
     find_homography as find_homography,
-    find_homography_checked as find_homography_checked,
     projective_homography as projective_homography,
 )
 from ._reconstruction import (

@@ -126,16 +126,16 @@ def project(points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"]) -> Fl
     - `A`: the intrinsic matrix.
 
     A point with depth $z \\le 0$ ("behind the camera"), a non-finite point or an unusable
-    `A` (non-finite, a zero focal length) raises at run time; `project_checked` returns a
+    `A` (non-finite, a zero focal length) raises at run time; `_project_checked` returns a
     result code instead.
 
     **Returns:** pixel coordinates, shape (..., 2).
     """
-    pixels, result = project_checked(points, A)
+    pixels, result = _project_checked(points, A)
     return raise_or_keep(result, pixels, True)
 
 
-def project_checked(
+def _project_checked(
     points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"]
 ) -> tuple[Float[Array, "... 2"], RESULTS]:
     """`project` that never raises: returns `(pixels, result)`; the pixels of a point behind

@@ -292,15 +292,15 @@ def find_homography(
     - `p_cur`: current pixels $p_i$, shape (n, 2).
 
     Collinear or coincident points, non-finite pixels or a vanishing $g_{33}$ raise at run
-    time; `find_homography_checked` returns a result code instead.
+    time; `_find_homography_checked` returns a result code instead.
 
     **Returns:** $G_n$, shape (3, 3).
     """
-    G_n, result = find_homography_checked(p_ref, p_cur)
+    G_n, result = _find_homography_checked(p_ref, p_cur)
     return raise_or_keep(result, G_n, True)
 
 
-def find_homography_checked(
+def _find_homography_checked(
     p_ref: Float[ArrayLike, "n 2"], p_cur: Float[ArrayLike, "n 2"]
 ) -> tuple[Float[Array, "3 3"], RESULTS]:
     """`find_homography` that never raises: returns `(G_n, result)`, with `G_n` all NaN

@@ -129,7 +129,7 @@ def moving_point_from_file(path) -> FileEstimate:
     data = MovingPointData.load(path)
     t = np.asarray(data.t, float)
     observer, u, info = moving_point_observer_for_data(data)
-    stream = moving_point_stream(t, data.pixels, u, data.A, dropped="extrapolate")
+    stream = moving_point_stream(t, data.pixels, u, data.A, dropped="extrapolate", throw=False)
     dt = integration_step(stream, observer, max_step=1e-3)  # the thesis' 1 kHz law
     sol = run(observer, stream, dt=dt, saveat=SaveAt(), throw=False)
     failure = _failure(sol, "observer")
@@ -173,8 +173,9 @@ def static_points_from_file(path) -> FileEstimate:
     k = data.n_known
     pixels = np.asarray(data.pixels, float)
     stream = static_points_stream(
-        data.t, data.platform_R, data.platform_x, pixels[:, k:], pixels[:, :k], data.known_features
-    )
+        data.t, data.platform_R, data.platform_x, pixels[:, k:], pixels[:, :k],
+        data.known_features, throw=False,
+    )  # fmt: skip
     longest = float(np.max(np.diff(np.asarray(data.t, float))))
     # the gains of `from_nominal` are derived for the step, so no bound applies here
     dt = integration_step(stream, max_step=1e-3)
@@ -250,7 +251,7 @@ def velocity_file_reproduction(path, filter_hz=None, *, quiet=True, write=None) 
 
 
 def moving_point_file_reproduction(path, *, quiet=True, write=None) -> Reproduction:
-    """`moving_point_from_file` as `visjax structure --data` reports it: `estimate.npz`
+    """`moving_point_from_file` as `visjax moving_point --data` reports it: `estimate.npz`
     (`t`, `position`, `x_hat`), the figure `structure` and the lines."""
     from ..plots import plot_structure
 
@@ -275,7 +276,7 @@ def moving_point_file_reproduction(path, *, quiet=True, write=None) -> Reproduct
 
 
 def static_points_file_reproduction(path, *, quiet=True, write=None) -> Reproduction:
-    """`static_points_from_file` as `visjax euclidean --data` reports it: `estimate.npz`
+    """`static_points_from_file` as `visjax static_points --data` reports it: `estimate.npz`
     (`t`, `features`, the recovered camera `A`, `R_c`, `x_c` over time), the figure
     `euclidean` and the lines."""
     from ..plots import plot_feature_estimates

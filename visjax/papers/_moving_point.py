@@ -90,8 +90,9 @@ class MovingPointProblem(AbstractProblem):
         from ..estimators import moving_point_stream
 
         return moving_point_stream(
-            self.frame_ts, pixels, self.frame_velocities, self.Kc, dropped="extrapolate"
-        )
+            self.frame_ts, pixels, self.frame_velocities, self.Kc, dropped="extrapolate",
+            throw=False,
+        )  # fmt: skip
 
     def solve(self, method, params, inputs, *, outputs=False):
         from ..baselines import moving_point_ekf, triangulate_point
@@ -102,7 +103,7 @@ class MovingPointProblem(AbstractProblem):
             k = self.frame_index
             truth = None if self.truth is None else held(self.truth_ts, self.truth, self.ts)
             stream = moving_point_stream(
-                self.ts, pixels[k], self.frame_velocities[k], self.Kc, truth=truth
+                self.ts, pixels[k], self.frame_velocities[k], self.Kc, truth=truth, throw=False
             )
             obs = eqx.tree_at(
                 lambda o: (o.K, o.Y, o.K_u),

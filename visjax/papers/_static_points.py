@@ -96,7 +96,7 @@ class StaticPointsProblem(AbstractProblem):
 
         k = self.n_known
         stream = static_points_stream(
-            self.ts, self.R_b, self.x_b, pixels[:, k:], pixels[:, :k], self.omega_c
+            self.ts, self.R_b, self.x_b, pixels[:, k:], pixels[:, :k], self.omega_c, throw=False
         )
         est = StaticPointsEstimator.from_nominal(
             stream, self.A_nominal, self.R_c_nominal, self.x_c_nominal, dt=self.dt

@@ -641,7 +641,7 @@ def testbed(
 
     def estimate_from(px):
         stream = moving_point_stream(
-            frame_ts, px, vel_obs, jnp.asarray(Kc_observer, float), dropped="hold"
+            frame_ts, px, vel_obs, jnp.asarray(Kc_observer, float), dropped="hold", throw=False
         )
         sol = run(obs, stream, dt=1.0 / rate_hz, throw=False)
         est = np.asarray(sol.outputs.position) / to_unit
@@ -725,7 +725,7 @@ def _pose_matrix(R, p):
 
 
 # --------------------------------------------------------------------------------------
-# The reproductions that `visjax structure`, `visjax testbed` and `visjax reproduce` print
+# The reproductions that `visjax moving_point`, `visjax testbed` and `visjax reproduce` print
 # and write (`visjax.report`).
 
 TABLE_5_1 = {"toolbox": (0.0121, 0.0349, 0.0958), "least_squares": (0.0119, 0.0179, 0.0800)}

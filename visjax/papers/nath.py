@@ -225,7 +225,7 @@ def final_errors(r: EuclideanRun) -> np.ndarray:
     return np.linalg.norm(np.asarray(r.omega_s[-1] - r.omega_true), axis=-1)
 
 
-# The reproduction that `visjax euclidean` and `visjax reproduce` print and write
+# The reproduction that `visjax static_points` and `visjax reproduce` print and write
 # (`visjax.report`).
 
 POSITION_BOUND_MM = 1.0
@@ -243,7 +243,7 @@ def euclidean_reproduction(
     write=None,
 ) -> Reproduction:
     """The adaptive least-squares structure estimator on its simulation
-    (`euclidean_experiment`), as `visjax euclidean` reports it: the final position errors,
+    (`euclidean_experiment`), as `visjax static_points` reports it: the final position errors,
     `estimate.npz` (`t`, `features` over time, `truth`) and the figure `euclidean`. With
     `seeds` > 1, the noise seeds `seed, ..., seed + seeds - 1`: the errors are their
     medians (each seed's in `final_position_error_m_seeds`), `features` has a leading seed
