@@ -90,8 +90,8 @@ def test_linear_case_is_the_kalman_filter(data):
     xs, Ps = numpy_kalman(ts, zs, us, x0, P0, 0.3, 0.05, present, 3)
     assert sol.result == RESULTS.successful
     assert int(sol.failed_sample) == -1
-    np.testing.assert_allclose(sol.xs, xs, rtol=1e-10, atol=1e-10)
-    np.testing.assert_allclose(sol.Ps, Ps, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(sol.outputs.x, xs, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(sol.outputs.P, Ps, rtol=1e-9, atol=1e-12)
 
 
 def test_vmap_flags_one_seed_and_keeps_the_others(data):
@@ -108,10 +108,10 @@ def test_vmap_flags_one_seed_and_keeps_the_others(data):
     assert codes[2] == RESULTS.nonfinite_measurement._value
     assert int(sols.failed_sample[2]) == 12
     one = run(model, ts, batch[0], us, x0, P0, present=present)
-    np.testing.assert_allclose(sols.xs[0], one.xs, rtol=1e-12, atol=1e-12)
-    assert np.all(np.isfinite(sols.xs))  # frozen at the last good values, never NaN
+    np.testing.assert_allclose(sols.outputs.x[0], one.outputs.x, rtol=1e-12, atol=1e-12)
+    assert np.all(np.isfinite(sols.outputs.x))  # frozen at the last good values, never NaN
     with pytest.raises(RuntimeError):
-        run(model, ts, batch[1], us, x0, P0, present=present).xs.block_until_ready()
+        run(model, ts, batch[1], us, x0, P0, present=present).outputs.x.block_until_ready()
 
 
 def test_gradient_against_finite_differences(data):
@@ -121,7 +121,7 @@ def test_gradient_against_finite_differences(data):
 
     def loss(scale):
         sol = extended_kalman_filter(model, ts, zs * scale, us, x0, P0, present=present)
-        return jnp.sum(sol.xs**2)
+        return jnp.sum(sol.outputs.x**2)
 
     g = jax.grad(loss)(1.0)
     h = 1e-6

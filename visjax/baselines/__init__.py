@@ -10,7 +10,11 @@ from ._bundle import (
 )
 from ._ekf import (
     AbstractEKFModel as AbstractEKFModel,
-    EKFSolution as EKFSolution,
+    EKFOutput as EKFOutput,
+    EKFSample as EKFSample,
+    EKFState as EKFState,
+    ExtendedKalmanFilter as ExtendedKalmanFilter,
+    ekf_stream as ekf_stream,
     extended_kalman_filter as extended_kalman_filter,
 )
 from ._opencv import opencv_reconstruction as opencv_reconstruction

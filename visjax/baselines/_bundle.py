@@ -405,22 +405,13 @@ def static_points_ekf(
         present=stream.present,
         throw=False,
     )
-    bad_pose = ~jax.vmap(lambda R, x: all_finite((R, x)))(ys.R_b, ys.x_b)
-    first_bad = jnp.argmax(bad_pose)
-    result = RESULTS.where(
-        jnp.any(bad_pose) & ((sol.failed_sample < 0) | (first_bad <= sol.failed_sample)),
-        RESULTS.nonfinite_measurement,
-        sol.result,
-    )
-    failed = jnp.where(
-        jnp.any(bad_pose) & ((sol.failed_sample < 0) | (first_bad <= sol.failed_sample)),
-        first_bad,
-        sol.failed_sample,
-    )
+    # a non-finite pose is an input of the filter's samples: the runner stops there with
+    # `nonfinite_measurement`
+    result, failed = sol.result, sol.failed_sample
 
     def to_output(x):
         A = _A_from(x[:5] * scale)
         return AdaptiveOutput(omega_s=x[11:].reshape(n, 3), A=A, R_c=so3_exp(x[5:8]), x_c=x[8:11])
 
-    outputs = raise_or_keep(result, jax.vmap(to_output)(sol.xs), throw)
-    return baseline_solution(stream.ts, outputs, result, failed, sol.Ps)
+    outputs = raise_or_keep(result, jax.vmap(to_output)(sol.outputs.x), throw)
+    return baseline_solution(stream.ts, outputs, result, failed, sol.outputs.P)

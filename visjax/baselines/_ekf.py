@@ -1,8 +1,8 @@
-"""A generic extended Kalman filter as one pure `jax.lax.scan` (the baselines' filter core).
-
-The filter alternates, per sample $k$ of a stream: an update with the measurement $z_k$
-(the components that are NaN are missing and skipped), then a prediction to the next
-sample time in `substeps` equal steps of the model's discrete transition. The textbook
+"""A generic extended Kalman filter, an estimator on `visjax.estimators.run` like the others
+(the baselines' filter core): its `jump` at each new sample is the prediction from the
+previous sample's time in `substeps` equal steps of the model's discrete transition, then
+the update with the measurement $z_k$ (the components that are NaN are missing and
+skipped). The textbook
 equations (not from the papers; e.g. Bar-Shalom, Li and Kirubarajan, "Estimation with
 Applications to Tracking and Navigation", ch. 10):
 
@@ -13,8 +13,9 @@ Applications to Tracking and Navigation", ch. 10):
     semi-definite in floating point), with $H = \\partial h / \\partial x$.
 
 A missing component gets zero innovation and a zero row of $H$: it leaves the mean and the
-covariance as they are. The result code says whether the run stayed finite and valid; after
-a failure the mean and covariance are frozen at their last good values.
+covariance as they are. The runner's result code says whether the run stayed finite and
+valid (`model.valid`); after a failure the mean and covariance are frozen at their last
+good values.
 """
 
 from typing import final
@@ -22,11 +23,10 @@ from typing import final
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Bool, Float, Int, PyTree
+from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
-from .._results import RESULTS, all_finite, first_failure, raise_or_keep
 from .._util import as_float
-from ..estimators import Solution
+from ..estimators import AbstractJumpEstimator, Solution, Stream, checked_samples, run
 
 
 class AbstractEKFModel(eqx.Module):
@@ -54,22 +54,7 @@ class AbstractEKFModel(eqx.Module):
         return jnp.array(True)
 
 
-@final
-class EKFSolution(eqx.Module):
-    """What `extended_kalman_filter` returns: `ts` (N,), the filtered means `xs` (N, n) and
-    covariances `Ps` (N, n, n) after each sample's update, `result` (a `RESULTS` item) and
-    `failed_sample` (the sample at which the filter left its valid set or became
-    non-finite, -1 if it did not)."""
-
-    ts: Float[Array, " N"]
-    xs: Float[Array, "N n"]
-    Ps: Float[Array, "N n n"]
-    result: RESULTS
-    failed_sample: Int[Array, ""]
-
-
-def _update(model, x, P, z, u):
-    seen = jnp.isfinite(z)
+def _update(model, x, P, z, seen, u):
     H = jax.jacfwd(model.measure)(x, u)
     H = jnp.where(seen[:, None], H, 0.0)
     innovation = jnp.where(seen, z - model.measure(x, u), 0.0)
@@ -96,48 +81,111 @@ def _predict(model, x, P, u, dt, substeps):
     return jax.lax.fori_loop(0, substeps, step, (x, P))
 
 
-def extended_kalman_filter(
-    model: AbstractEKFModel,
+@final
+class EKFSample(eqx.Module):
+    """One sample (in a `Stream`, all samples: a leading axis) of an EKF's stream: its time
+    `t`, the measurement `z` (m,) with its missing components set to 0, which components
+    were `seen` (m,) bool, and the known input `u` held from this sample to the next (or
+    `None`)."""
+
+    t: Float[Array, "*batch"]
+    z: Float[Array, "*batch m"]
+    seen: Bool[Array, "*batch m"]
+    u: PyTree
+
+
+@final
+class EKFState(eqx.Module):
+    """The filter's mean `x` and covariance `P` after the update at time `t`, and the input
+    `u` held since then (the next prediction's)."""
+
+    x: Float[Array, " n"]
+    P: Float[Array, "n n"]
+    t: Float[Array, ""]
+    u: PyTree
+
+
+@final
+class EKFOutput(eqx.Module):
+    """The filtered mean `x` (n,) and covariance `P` (n, n) after a sample's update."""
+
+    x: Float[Array, "*batch n"]
+    P: Float[Array, "*batch n n"]
+
+
+@final
+class ExtendedKalmanFilter(AbstractJumpEstimator):
+    """An extended Kalman filter as an estimator on `visjax.estimators.run`: its `jump` (at
+    each new sample) predicts from the previous sample's time to this one's in `substeps`
+    equal steps of the model's transition under the input held since then, then updates
+    with the sample's measurement (module docstring); between samples nothing moves.
+
+    **Fields:** `model` (an `AbstractEKFModel`), the prior `x0` (n,) and `P0` (n, n) at the
+    first sample (before its update), `substeps` (static). Its stream's samples are
+    `EKFSample`s (`ekf_stream` builds them); run it at the sample times (`dt=None`).
+    """
+
+    model: AbstractEKFModel
+    x0: Float[Array, " n"] = eqx.field(converter=as_float)
+    P0: Float[Array, "n n"] = eqx.field(converter=as_float)
+    substeps: int = eqx.field(default=1, static=True)
+
+    def __check_init__(self):
+        if self.x0.ndim != 1:
+            raise ValueError(f"`x0` must have shape (n,); got {self.x0.shape}.")
+        n = self.x0.shape[0]
+        if self.P0.shape != (n, n):
+            raise ValueError(f"`P0` must have shape ({n}, {n}); got {self.P0.shape}.")
+        if not (isinstance(self.substeps, int) and self.substeps >= 1):
+            raise ValueError(f"`substeps` must be a positive int; got {self.substeps!r}.")
+
+    def init(self, y0: EKFSample) -> EKFState:
+        return EKFState(x=self.x0, P=self.P0, t=y0.t, u=y0.u)
+
+    def vector_field(self, t, state: EKFState, y: EKFSample) -> EKFState:
+        return jax.tree_util.tree_map(jnp.zeros_like, state)
+
+    def jump(self, state: EKFState, y: EKFSample) -> EKFState:
+        gap = y.t - state.t  # 0 at the first sample: no prediction
+        x_p, P_p = _predict(self.model, state.x, state.P, state.u, gap / self.substeps,
+                            self.substeps)  # fmt: skip
+        later = gap > 0
+        x = jnp.where(later, x_p, state.x)
+        P = jnp.where(later, P_p, state.P)
+        x, P = _update(self.model, x, P, y.z, y.seen, y.u)
+        return EKFState(x=x, P=P, t=y.t, u=y.u)
+
+    def output(self, t, state: EKFState, y: EKFSample) -> EKFOutput:
+        return EKFOutput(x=state.x, P=state.P)
+
+    def valid(self, state: EKFState, y: EKFSample):
+        return self.model.valid(state.x, y.u)
+
+
+def ekf_stream(
     ts: Float[ArrayLike, " N"],
     zs: Float[ArrayLike, "N m"],
-    us: PyTree,
-    x0: Float[ArrayLike, " n"],
-    P0: Float[ArrayLike, "n n"],
+    us: PyTree = None,
     *,
     present: Bool[ArrayLike, " N"] | None = None,
-    substeps: int = 1,
     throw: bool = True,
-) -> EKFSolution:
-    """Run an extended Kalman filter over a sampled stream (one `jax.lax.scan`).
+) -> Stream:
+    """The `Stream` of an `ExtendedKalmanFilter` from its measurements.
 
-    **Arguments:**
-
-    - `model`: an `AbstractEKFModel`.
-    - `ts` (N,): the sample times (any rate; the prediction covers each interval).
-    - `zs` (N, m): the measurements; a NaN component is missing at that sample and is
-        skipped (an infinite one is a bad measurement: `RESULTS.nonfinite_measurement`).
-    - `us`: the known inputs, a pytree of leading size N (the held input of each interval),
-        or `None`.
-    - `x0` (n,), `P0` (n, n): the prior at `ts[0]`, before the first update.
-    - `present` (N,): `False` skips a sample's update entirely (a dropped frame).
-    - `substeps`: the interval between two samples is predicted in this many equal steps
-        (static: the model's transition is a discretisation at step `dt`).
-    - `throw`: raise on failure (default), else return the result code.
-
-    Works under `jit`, `vmap` (over streams, noise seeds, models) and `grad` (a
-    fixed-length scan).
+    **Arguments:** `ts` (N,) the sample times (any rate); `zs` (N, m) the measurements, a
+    NaN component missing at that sample (its update skipped); `us` the known inputs, a
+    pytree of leading size N (the held input of each interval), or `None`; `present` (N,):
+    `False` skips a sample's update entirely (a dropped frame; the prediction still covers
+    its interval); `throw`: an infinite measurement component (a bad measurement, not a
+    missing one) raises here, naming the sample; with `throw=False` `run` stops there with
+    `RESULTS.nonfinite_measurement`.
     """
-    ts, zs, x0, P0 = (as_float(a) for a in (ts, zs, x0, P0))
+    ts, zs = as_float(ts), as_float(zs)
     if ts.ndim != 1 or ts.shape[0] < 1:
         raise ValueError(f"`ts` must have shape (N,); got {ts.shape}.")
     n_samples = ts.shape[0]
     if zs.ndim != 2 or zs.shape[0] != n_samples:
         raise ValueError(f"`zs` must have shape ({n_samples}, m); got {zs.shape}.")
-    if x0.ndim != 1:
-        raise ValueError(f"`x0` must have shape (n,); got {x0.shape}.")
-    n = x0.shape[0]
-    if P0.shape != (n, n):
-        raise ValueError(f"`P0` must have shape ({n}, {n}); got {P0.shape}.")
     us = jax.tree_util.tree_map(jnp.asarray, us)
     for leaf in jax.tree_util.tree_leaves(us):
         if jnp.ndim(leaf) < 1 or jnp.shape(leaf)[0] != n_samples:
@@ -149,44 +197,41 @@ def extended_kalman_filter(
     present = jnp.asarray(present, dtype=bool)
     if present.shape != (n_samples,):
         raise ValueError(f"`present` must have shape ({n_samples},); got {present.shape}.")
-    if not (isinstance(substeps, int) and substeps >= 1):
-        raise ValueError(f"`substeps` must be a positive int; got {substeps!r}.")
+    # a dropped sample is an update with nothing seen (the mean and covariance unchanged)
+    seen = ~jnp.isnan(zs) & present[:, None]
+    z = jnp.where(seen, zs, 0.0)
+    ys = EKFSample(t=ts, z=z, seen=seen, u=us)
+    return checked_samples(Stream(ts=ts, ys=ys), "ekf_stream", throw)
 
-    dts = jnp.diff(ts, append=ts[-1:]) / substeps
-    sample = lambda tree, k: jax.tree_util.tree_map(lambda a: a[k], tree)  # noqa: E731
 
-    def body(carry, k):
-        x, P, result, failed = carry
-        u = sample(us, k)
-        z = zs[k]
-        bad_z = jnp.any(jnp.isinf(z))
-        x_u, P_u = _update(model, x, P, z, u)
-        x_u = jnp.where(present[k], x_u, x)
-        P_u = jnp.where(present[k], P_u, P)
-        ok_u = all_finite((x_u, P_u)) & model.valid(x_u, u)
-        x_p, P_p = _predict(model, x_u, P_u, u, dts[k], substeps)
-        ok_p = all_finite((x_p, P_p)) & model.valid(x_p, u)
-        code = RESULTS.where(
-            bad_z & present[k],
-            RESULTS.nonfinite_measurement,
-            RESULTS.where(
-                all_finite((x_u, P_u, x_p, P_p)), RESULTS.diverged, RESULTS.nonfinite_state
-            ),
-        )
-        fails = ((bad_z & present[k]) | ~ok_u) | ~ok_p
-        code = RESULTS.where(fails, code, RESULTS.successful)
-        result, failed = first_failure(result, failed, code, k)
-        keep = failed < 0
-        x_out = jnp.where(keep, x_u, x)
-        P_out = jnp.where(keep, P_u, P)
-        x_next = jnp.where(keep, x_p, x)
-        P_next = jnp.where(keep, P_p, P)
-        return (x_next, P_next, result, failed), (x_out, P_out)
+def extended_kalman_filter(
+    model: AbstractEKFModel,
+    ts: Float[ArrayLike, " N"],
+    zs: Float[ArrayLike, "N m"],
+    us: PyTree,
+    x0: Float[ArrayLike, " n"],
+    P0: Float[ArrayLike, "n n"],
+    *,
+    present: Bool[ArrayLike, " N"] | None = None,
+    substeps: int = 1,
+    throw: bool = True,
+) -> Solution:
+    """Run an extended Kalman filter over a sampled stream: `run(ExtendedKalmanFilter(model,
+    x0, P0, substeps), ekf_stream(ts, zs, us, present=present))` at the sample times.
 
-    init = (x0, P0, RESULTS.successful, jnp.array(-1))
-    (_, _, result, failed), (xs, Ps) = jax.lax.scan(body, init, jnp.arange(n_samples))
-    xs = raise_or_keep(result, xs, throw)
-    return EKFSolution(ts=ts, xs=xs, Ps=Ps, result=result, failed_sample=failed)
+    **Arguments:** as `ExtendedKalmanFilter` and `ekf_stream`; `x0` (n,), `P0` (n, n) the
+    prior at `ts[0]`, before the first update; `throw`: raise on failure (default), else
+    return the result code.
+
+    **Returns:** the runner's `Solution`: `outputs` an `EKFOutput` per sample (the mean and
+    covariance after its update), `result`, `failed_sample` (the sample at which the
+    filter left its valid set or became non-finite; a failed prediction is reported at the
+    sample it predicts to), the outputs frozen at the last good values after a failure.
+    Works under `jit`, `vmap` (over streams, noise seeds, models) and `grad`.
+    """
+    filt = ExtendedKalmanFilter(model=model, x0=x0, P0=P0, substeps=substeps)
+    stream = ekf_stream(ts, zs, us, present=present, throw=False)
+    return run(filt, stream, dt=None, throw=throw)
 
 
 def baseline_solution(ts, outputs, result, failed_sample, diagnostics=None) -> Solution:

@@ -288,11 +288,9 @@ def moving_point_ekf(
         substeps=substeps,
         throw=False,
     )
-    bad_u = ~jnp.all(jnp.isfinite(u), axis=1)
-    first_bad = jnp.argmax(bad_u)
-    earlier = jnp.any(bad_u) & ((sol.failed_sample < 0) | (first_bad <= sol.failed_sample))
-    result = RESULTS.where(earlier, RESULTS.nonfinite_measurement, sol.result)
-    failed = jnp.where(earlier, first_bad, sol.failed_sample)
-    outputs = jax.vmap(lambda x: _output(jnp.stack([x[0], x[1], 1.0]) / x[2]))(sol.xs)
+    # a non-finite camera velocity is an input of the filter's samples: the runner stops
+    # there with `nonfinite_measurement`
+    result, failed = sol.result, sol.failed_sample
+    outputs = jax.vmap(lambda x: _output(jnp.stack([x[0], x[1], 1.0]) / x[2]))(sol.outputs.x)
     outputs = raise_or_keep(result, outputs, throw)
-    return baseline_solution(ts, outputs, result, failed, sol.Ps)
+    return baseline_solution(ts, outputs, result, failed, sol.outputs.P)

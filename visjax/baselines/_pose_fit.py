@@ -403,5 +403,5 @@ def velocity_ekf(
         v = x[6:12]
         return VelocityOutput(v_hat=v, v_object=jnp.concatenate([R.T @ v[:3], R.T @ v[3:]]))
 
-    outputs = raise_or_keep(result, jax.vmap(to_output)(sol.xs), throw)
-    return baseline_solution(ts, outputs, result, failed, sol.Ps)
+    outputs = raise_or_keep(result, jax.vmap(to_output)(sol.outputs.x), throw)
+    return baseline_solution(ts, outputs, result, failed, sol.outputs.P)

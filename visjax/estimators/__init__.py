@@ -22,6 +22,7 @@ from ._base import (
     Stream as Stream,
     WindowRMS as WindowRMS,
     WindowSummary as WindowSummary,
+    checked_samples as checked_samples,
     integration_step as integration_step,
     run as run,
 )

@@ -87,7 +87,8 @@ class AbstractEstimator(eqx.Module):
 class AbstractJumpEstimator(AbstractEstimator):
     """An estimator with a discrete update when a new sample arrives: `run` applies
     `jump(state, y)` at each new present sample (the first included, after `init`), before
-    reading the output and integrating under that sample. Covariance resetting and a
+    reading the output and integrating under that sample; not on a non-finite sample (the
+    run stops there) nor after the run has failed. Covariance resetting and a
     filter's measurement update are jumps."""
 
     @abc.abstractmethod
@@ -737,8 +738,11 @@ def _run(
         k = held_sample(j)
         y, y_finite = sample(j, y_held)
         if has_jump:
+            # only on a new, finite sample of a run that has not failed (after a failure
+            # the state and the outputs stay frozen at their last good values)
+            fresh = (k != carry.k_prev) & y_finite & (carry.failed < 0)
             state = jax.lax.cond(
-                k != carry.k_prev, lambda s, y: estimator.jump(s, y), lambda s, y: s, state_in, y
+                fresh, lambda s, y: estimator.jump(s, y), lambda s, y: s, state_in, y
             )
         else:
             state = state_in
