@@ -51,7 +51,6 @@ _seed = _number(int, lambda v: v >= 0, "a non-negative integer")
 
 
 def _formats(text: str) -> list[str]:
-    """`--format png,pdf,svg`: figure formats, comma-separated."""
     chosen = [f.strip().lower() for f in text.split(",") if f.strip()]
     if not chosen or any(f not in report.FORMATS for f in chosen):
         raise argparse.ArgumentTypeError(
@@ -131,8 +130,7 @@ def _verb(sub, name, help, *, seeds, noise, grid):
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
-    about = "Vision-based nonlinear estimators in JAX (see docs/command-line.md)"
-    parser = _Parser(prog="visjax", description=about)
+    parser = _Parser(prog="visjax", description="Vision-based estimators in JAX (docs/)")
     parser.add_argument("--version", action="version", version=f"visjax {__version__}")
     _arg(parser, "--import", None, None, "a module registering problems of your own",
          dest="modules", action="append", metavar="MODULE")  # fmt: skip
@@ -151,20 +149,15 @@ def build_parser() -> argparse.ArgumentParser:
     _arg(v, "--filter-hz", _positive, None, "with --data: a causal 2nd-order low-pass")
     _common(v, _OUT, 0.0, _FIRST, _SEEDS, _OWN_DATA)
 
-    help = "Jang's unknown input observer on a moving point, or your data"
-    st = sub.add_parser("moving_point", aliases=["structure"], help=help)
-    st.set_defaults(command="moving_point")
+    st = _problem_parser(sub, "moving_point", "structure", "Jang's unknown input observer")
     _arg(st, "--set", None, None, "I.1 ... II.3 (repeatable; default: all)", action="append")
     _arg(st, "--duration", _positive, 30.0, "seconds per set (default 30)")
     _common(st, _OUT, 0.1, _FIRST, _SEEDS, _OWN_DATA)
 
-    help = "Nath et al.'s static points from an uncalibrated camera, or your data"
-    eu = sub.add_parser("static_points", aliases=["euclidean"], help=help)
-    eu.set_defaults(command="static_points")
+    eu = _problem_parser(sub, "static_points", "euclidean", "Nath et al.'s uncalibrated camera")
     _arg(eu, "--duration", _positive, 30.0, "seconds (default 30)")
     _common(eu, _OUT, 0.0, _FIRST, _SEEDS, _OWN_DATA)
-    # --noise-px: the option's name before version 0.3, kept so that old scripts run
-    _arg(eu, "--noise-px", _nonnegative, None, argparse.SUPPRESS, dest="noise")
+    _arg(eu, "--noise-px", _nonnegative, None, argparse.SUPPRESS, dest="noise")  # 0.2's name
 
     run = _verb(sub, "run", "one method of a problem once", seeds=None, noise=0.0, grid=False)
     _arg(run, "--method", None, None, "the method (default: the estimator)")
@@ -204,6 +197,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _problem_parser(sub, name, old, who):
+    """A paper's command named for its problem, its name before version 0.3 an alias."""
+    p = sub.add_parser(name, aliases=[old], help=f"{who}, or your data")
+    p.set_defaults(command=name)
+    return p
+
+
 def _call(a):
     """The one library call of the command, its parameters taken from the options of the
     same name (`--format` is `formats`; `--set` is `sets` or `variants`; `--data` `path`)."""
@@ -217,10 +217,8 @@ def _call(a):
         fn = getattr(report, "reproduce" if a.command == "reproduce" else f"{a.command}_report")
     chosen, formats, path = (getattr(a, k, None) for k in ("set", "format", "data"))
     values = {**vars(a), "formats": formats, "sets": chosen, "variants": chosen, "path": path}
-    if a.command == "testbed":
-        values.update(video=not a.no_video, studies=not a.no_studies)
-    names = inspect.signature(fn).parameters
-    return fn(**{k: v for k, v in values.items() if k in names})
+    values.update(video=not vars(a).get("no_video"), studies=not vars(a).get("no_studies"))
+    return fn(**{k: v for k, v in values.items() if k in inspect.signature(fn).parameters})
 
 
 def _check(a) -> None:
@@ -274,24 +272,22 @@ def main(argv=None) -> int:
     except argparse.ArgumentTypeError as e:
         parser.error(str(e))
     try:
-        if args.out is None:
-            _call(args)
-            return 0
         from .io import staged_output
 
-        with staged_output(args.out, file=getattr(args, "out_is_file", False)) as staged:
-            args.out = str(staged)
+        if args.out is None:
             _call(args)
+        else:
+            with staged_output(args.out, file=getattr(args, "out_is_file", False)) as staged:
+                args.out = str(staged)
+                _call(args)
         return 0
-    except (ValueError, RuntimeError) as e:
-        # a bad data file or a run the estimator could not finish: one line, no traceback
+    except (ValueError, RuntimeError) as e:  # a bad data file, a failed run: one line
         sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
         return 1
 
 
 def _one_line(error: Exception) -> str:
-    """The message of an error in one line: for a runtime error raised inside compiled
-    code (`equinox.error_if`), its own message, not the traceback banner around it."""
+    """An error's message in one line (an `equinox.error_if`'s own, not JAX's banner)."""
     lines = [ln.strip() for ln in str(error).strip().splitlines() if ln.strip()]
     for line in lines:
         if line.startswith(("equinox.EquinoxRuntimeError:", "EquinoxRuntimeError:")):
