@@ -507,3 +507,23 @@ def test_integration_step_is_one_rule():
         integration_step(stream, LinearObserver(a=jnp.array(jnp.inf), b=jnp.array(1.0)))
     with pytest.raises(ValueError, match="max_step"):
         integration_step(stream, max_step=0.0)
+
+
+def test_window_rms_over_a_saved_trajectory_equals_the_reducer_and_skips_nan_on_request():
+    """`WindowRMS.over` (a baseline's or a data file's saved trajectory) is the in-loop
+    reducer's summary; a NaN error makes it NaN (a failed run is never scored) unless
+    `skip_nan`, which leaves out each NaN component on its own."""
+    window = WindowRMS(1.0, 3.0)
+    ts = jnp.arange(5.0)
+    est = jnp.array([[9.0, 9.0], [1.0, 2.0], [3.0, jnp.nan], [4.0, 4.0], [9.0, 9.0]])
+    truth = jnp.zeros((5, 2))
+    acc = window.init(est[0], truth[0])
+    for k in range(5):
+        acc = window.update(acc, ts[k], est[k], truth[k])
+    assert np.isnan(float(acc.rms[1])) and float(acc.rms[0]) == np.sqrt(5.0)
+    over = window.over(ts, est, truth)
+    np.testing.assert_array_equal(over.rms, acc.rms)
+    skipped = window.over(ts, est, truth, skip_nan=True)
+    np.testing.assert_allclose(skipped.rms, [np.sqrt(5.0), 2.0], rtol=1e-15)
+    np.testing.assert_array_equal(skipped.count, [2.0, 1.0])
+    np.testing.assert_array_equal(skipped.max, [3.0, 2.0])

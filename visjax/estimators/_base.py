@@ -234,7 +234,8 @@ class AbstractReducer(eqx.Module):
 
 @final
 class WindowSummary(eqx.Module):
-    """The sum of squares, the max-abs and the count of an error over a time window."""
+    """The sum of squares, the max-abs and the count of an error over a time window, per
+    component."""
 
     sumsq: Array
     max: Array
@@ -244,7 +245,7 @@ class WindowSummary(eqx.Module):
     def rms(self) -> Array:
         """The RMS per component (batched or not); NaN for an empty window."""
         count = jnp.where(self.count > 0, self.count, jnp.nan)
-        return jnp.sqrt(self.sumsq / count[..., None])
+        return jnp.sqrt(self.sumsq / count)
 
 
 @final
@@ -266,19 +267,24 @@ class WindowRMS(AbstractReducer):
     def init(self, output0, truth0) -> WindowSummary:
         e = self._error(output0, truth0)
         z = jnp.zeros_like(e)
-        return WindowSummary(sumsq=z, max=z, count=jnp.zeros((), e.dtype))
+        return WindowSummary(sumsq=z, max=z, count=z)
 
-    def over(self, ts, outputs, truth) -> WindowSummary:
+    def over(self, ts, outputs, truth, *, skip_nan: bool = False) -> WindowSummary:
         """The same summary of saved outputs at the times `ts` (M,) against `truth` (M,
-        ...): the window applied to a trajectory already computed (a baseline's), so that
-        every method is scored by one windowed RMS."""
+        ...): the window applied to a trajectory already computed (a baseline's, a data
+        file's), so that every method is scored by one windowed RMS. `skip_nan`: leave out
+        the NaN components of the error (a frame not seen in a data file) instead of
+        letting them make the summary NaN (the default: a failed run is never scored)."""
         e = self._error(outputs, truth)
         inside = (ts >= self.t_start) & (ts < self.t_end)
         mask = jnp.reshape(inside, inside.shape + (1,) * (e.ndim - 1))
+        mask = jnp.broadcast_to(mask, e.shape)
+        if skip_nan:
+            mask = mask & ~jnp.isnan(e)
         return WindowSummary(
             sumsq=jnp.sum(jnp.where(mask, e**2, 0.0), axis=0),
             max=jnp.max(jnp.where(mask, jnp.abs(e), 0.0), axis=0),
-            count=jnp.sum(inside).astype(e.dtype),
+            count=jnp.sum(mask, axis=0).astype(e.dtype),
         )
 
     def update(self, acc: WindowSummary, t, output, truth) -> WindowSummary:
@@ -287,7 +293,7 @@ class WindowRMS(AbstractReducer):
         return WindowSummary(
             sumsq=acc.sumsq + jnp.where(inside, e**2, 0.0),
             max=jnp.where(inside, jnp.maximum(acc.max, jnp.abs(e)), acc.max),
-            count=acc.count + jnp.where(inside, 1.0, 0.0),
+            count=acc.count + jnp.where(inside, 1.0, 0.0).astype(e.dtype),
         )
 
 

@@ -31,13 +31,17 @@ class FileEstimate:
 
 
 def last_half_rms(t, estimate, truth):
-    """The RMS error per component over the second half of the run (NaN samples left out,
-    as a dropped frame leaves them), and that window `[start, end]` in seconds."""
-    t = np.asarray(t)
-    half = t >= t[0] + 0.5 * (t[-1] - t[0])
-    err = np.asarray(estimate)[half] - np.asarray(truth)[half]
-    rms = [float(x) for x in np.sqrt(np.nanmean(err**2, axis=0))]
-    return rms, [float(t[half][0]), float(t[-1])]
+    """The RMS error per component over the second half of the run, `[start, end]` in
+    seconds, both ends included (`WindowRMS.over`, the one windowed RMS, with NaN samples
+    left out, as a dropped frame leaves them)."""
+    from ..estimators import WindowRMS
+
+    t = np.asarray(t, float)
+    start = t[0] + 0.5 * (t[-1] - t[0])
+    window = WindowRMS(start, np.nextafter(t[-1], np.inf))
+    summary = window.over(t, np.asarray(estimate, float), np.asarray(truth, float), skip_nan=True)
+    rms = [float(x) for x in np.asarray(summary.rms)]
+    return rms, [float(t[t >= start][0]), float(t[-1])]
 
 
 def _failure(sol, what: str) -> str | None:
