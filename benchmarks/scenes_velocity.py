@@ -39,8 +39,8 @@ def evaluate(name, scene, dt=None, filter_hz=None, **info):
     ts, pixels, A, body, s = (scene[k] for k in ("ts", "pixels", "A", "body", "features"))
     i, j = scene["known_pair"]
     L = jnp.linalg.norm(s[i] - s[j])
-    camera = fixed_camera(pixels, A, body.R[0], s[0], known_length=(i, j, L), dropouts=True)
-    stream = velocity_stream(ts, pixels, camera, dropouts=True)
+    camera = fixed_camera(pixels, A, body.R[0], s[0], known_length=(i, j, L), dropped="hold")
+    stream = velocity_stream(ts, pixels, camera, dropped="hold")
     z1 = camera.z1_star
     sol = run(VelocityEstimator(K=K_EQ63, rho=RHO_EQ63), stream, dt=dt, saveat=SaveAt())
     t = np.asarray(sol.ts)

@@ -79,9 +79,9 @@ def test_held_samples_and_dropped_frames():
     sc = section6_scenario(0.5, 100.0)
     pixels = sc.pixels.at[jnp.array([7, 8, 23])].set(jnp.nan)
     camera = fixed_camera(
-        pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star, dropouts=True
+        pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star, dropped="hold"
     )
-    lazy = velocity_stream(sc.ts, pixels, camera, dropouts=True, chunk=64)  # fmt: skip
+    lazy = velocity_stream(sc.ts, pixels, camera, dropped="hold", chunk=64)  # fmt: skip
     assert not bool(lazy.present[8]) and bool(lazy.present[9])
     eager = lazy.measured()
     a = run(EST, lazy, dt=1e-3, saveat=SaveAt(every=3))

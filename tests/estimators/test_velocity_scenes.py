@@ -62,8 +62,10 @@ def runs():
     for dropout in (0.0, 0.05):
         ts, pixels, seen, rig, body, s = _scene(dropout)
         L = jnp.linalg.norm(s[1] - s[3])
-        camera = fixed_camera(pixels, rig.A, body.R[0], s[0], known_length=(1, 3, L), dropouts=True)
-        stream = velocity_stream(ts, pixels, camera, dropouts=True, truth=body.twist)
+        camera = fixed_camera(
+            pixels, rig.A, body.R[0], s[0], known_length=(1, 3, L), dropped="hold"
+        )
+        stream = velocity_stream(ts, pixels, camera, dropped="hold", truth=body.twist)
         z1 = camera.z1_star
         sol = run(
             VelocityEstimator(K=K_EQ63, rho=RHO_EQ63),
@@ -128,13 +130,13 @@ def test_masked_homography_equals_the_homography_of_the_seen_features():
 def test_too_few_features_drop_the_frame_and_the_first_must_be_seen(no_jaxtyping):
     ts, pixels, seen, rig, body, s = _scene(0.0)
     bad = pixels.at[50, :3].set(jnp.nan)  # 3 of 6 left: frame 50 cannot be measured
-    camera = fixed_camera(bad, rig.A, body.R[0], s[0], known_length=(1, 3, 0.2), dropouts=True)
-    stream = velocity_stream(ts, bad, camera, dropouts=True, truth=body.twist)
+    camera = fixed_camera(bad, rig.A, body.R[0], s[0], known_length=(1, 3, 0.2), dropped="hold")
+    stream = velocity_stream(ts, bad, camera, dropped="hold", truth=body.twist)
     assert not bool(stream.present[50]) and bool(stream.present[51])
     with pytest.raises(ValueError, match="reference"):
         fixed_camera(
             pixels.at[0, 2].set(jnp.nan), rig.A, body.R[0], s[0], known_length=(1, 3, 0.2),
-            dropouts=True,
+            dropped="hold",
         )  # fmt: skip
     with pytest.raises(ValueError, match="visible"):
         euclidean_reconstruction(pixels[0], pixels[1], rig.A, visible=jnp.ones(5, bool))

@@ -589,6 +589,13 @@ def _check_frames(pixels, ts=None):
     return pixels
 
 
+def _dropped(dropped: str) -> bool:
+    """`dropped="hold"` (a NaN pixel is a feature out of view) or `"stop"` (a failure)."""
+    if dropped not in ("stop", "hold"):
+        raise ValueError(f'`dropped` must be "stop" or "hold"; got {dropped!r}.')
+    return dropped == "hold"
+
+
 def fixed_camera(
     pixels: Float[ArrayLike, "N n 2"],
     A: Float[ArrayLike, "3 3"],
@@ -601,7 +608,7 @@ def fixed_camera(
     n_prior: Float[ArrayLike, "3"] | None = None,
     known_length: tuple | None = None,
     origin_pixel: Float[ArrayLike, "2"] | None = None,
-    dropouts: bool = False,
+    dropped: str = "stop",
     throw: bool = True,
 ) -> FixedCamera:
     """The fixed camera's constants (`FixedCamera`), the unknown ones measured once from the
@@ -616,14 +623,16 @@ def fixed_camera(
     with the origin's pixel (default: `diagonal_intersection` of the four reference
     features).
 
-    With `dropouts=True` a NaN pixel is a feature out of view (the reference pixels must all
-    be finite). A depth recovery that fails (its premise broken, or a plane normal too
-    coarse from a few seconds of noisy frames: give `known_length` then) raises with
+    With `dropped="hold"` a NaN pixel is a feature out of view (the reference pixels must
+    all be finite), as in `velocity_stream`. A depth recovery that fails (its premise
+    broken, or a plane normal too coarse from a few seconds of noisy frames: give
+    `known_length` then) raises with
     `throw=True`; with `throw=False` the camera's `result` is
     `RESULTS.depth_recovery_failed`, every frame of a `velocity_stream` on it has that
     result, and `run` stops at the first sample.
     """
     pixels = _check_frames(pixels)
+    dropouts = _dropped(dropped)
     if reference_pixels is None:
         p_ref = pixels[0]
     else:
@@ -640,7 +649,7 @@ def fixed_camera(
         # the first frame instead, which must be measured)
         if not isinstance(p_ref, jax.core.Tracer) and not jnp.all(jnp.isfinite(p_ref)):
             raise ValueError(
-                "with `dropouts=True` the reference image must show every feature: "
+                'with `dropped="hold"` the reference image must show every feature: '
                 "a reference pixel is not finite."
             )
     if n_star is None:
@@ -674,7 +683,7 @@ def velocity_stream(
     pixels: Float[ArrayLike, "N n 2"],
     camera: FixedCamera,
     *,
-    dropouts: bool = False,
+    dropped: str = "stop",
     truth=None,
     throw: bool = True,
     chunk: int = 256,
@@ -692,11 +701,11 @@ def velocity_stream(
     for one long trajectory `chunk=len(ts)` with `run(..., unroll=8)` runs twice as fast
     (~700 bytes per prepared frame).
 
-    A missing sample is a NaN pixel. With `dropouts=True` it is a feature out of view in
+    A missing sample is a NaN pixel. With `dropped="hold"` it is a feature out of view in
     that frame: the homography is fitted to the features seen (with more than four
     features, any four or more; feature 1 may be among the missing), and a frame with too
     few is marked absent in `Stream.present`, so that `run` holds the previous frame over
-    it; the first frame must be measurable. With `dropouts=False` a frame that cannot be
+    it; the first frame must be measurable. With `dropped="stop"` (default) a frame that cannot be
     measured (a NaN pixel, degenerate points) raises with `throw=True` (one pass over the
     frames for their result codes, `chunk` at a time), and with `throw=False` is all NaN:
     `run` stops there with `RESULTS.nonfinite_measurement` and its index.
@@ -704,6 +713,7 @@ def velocity_stream(
     **Returns:** the `Stream` (its `measure.camera` is `camera`).
     """
     pixels = _check_frames(pixels, ts)
+    dropouts = _dropped(dropped)
     ts = as_float(ts)
     if not isinstance(camera, FixedCamera):
         raise TypeError(

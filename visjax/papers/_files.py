@@ -82,9 +82,9 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
         data.s1,
         known_length=data.length,
         reference_pixels=data.reference_pixels,
-        dropouts=True,
+        dropped="hold",
     )
-    stream = velocity_stream(data.t, data.pixels, camera, dropouts=True)
+    stream = velocity_stream(data.t, data.pixels, camera, dropped="hold")
     n_star, z1_star = camera.n_star, camera.z1_star
     K = K_EQ63 if data.K is None else data.K
     rho = RHO_EQ63 if data.rho is None else data.rho

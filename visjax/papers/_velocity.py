@@ -114,7 +114,7 @@ class VelocityProblem(AbstractProblem):
         pixels = inputs["pixels"]
         if method == "estimator":
             stream = velocity_stream(
-                self.ts, pixels, self._camera(pixels), dropouts=self.dropouts, truth=self.truth,
+                self.ts, pixels, self._camera(pixels), dropped=self._dropped(), truth=self.truth,
                 throw=False, chunk=self.chunk,
             )  # fmt: skip
             est = VelocityEstimator(
@@ -144,6 +144,9 @@ class VelocityProblem(AbstractProblem):
                 throw=False,
             )
         raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
+
+    def _dropped(self):
+        return "hold" if self.dropouts else "stop"
 
     def _camera(self, pixels):
         """The fixed camera's constants; the reference image is the first frame of this
@@ -290,7 +293,13 @@ def velocity_problem(
         source = str(data)
     dropouts = bool(np.any(~np.isfinite(np.asarray(clean))))
     camera = fixed_camera(
-        clean, A, R_star, s1, known_length=known_length, reference_pixels=p_ref, dropouts=dropouts
+        clean,
+        A,
+        R_star,
+        s1,
+        known_length=known_length,
+        reference_pixels=p_ref,
+        dropped="hold" if dropouts else "stop",
     )
     n_star, z1_star = camera.n_star, camera.z1_star
     jerk = (0.2 if data is None else 1.0) if max_jerk is None else float(max_jerk)
