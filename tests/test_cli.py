@@ -195,6 +195,10 @@ def test_one_option_vocabulary_and_version(capsys):
     # the commands' names before version 0.3 are aliases of the problems' names
     assert parser.parse_args(["euclidean"]).command == "static_points"
     assert parser.parse_args(["structure"]).command == "moving_point"
+    # the testbed's switches, and track's positional video, keep their own meanings
+    tb = parser.parse_args(["testbed", "--no-video"])
+    assert (tb.video, tb.studies) == (False, True)
+    assert parser.parse_args(["track", "v.mp4", "--out", "t.npz"]).video == "v.mp4"
     with pytest.raises(SystemExit):
         main(["velocity", "--format", "png,jpeg"])
     assert "png, pdf, svg" in capsys.readouterr().err

@@ -185,9 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     units = "the unit of the velocities in the thesis' A matrices (default cm)"
     _arg(tb, "--units", None, "cm", units, choices=("cm", "m"))
     _arg(tb, "--duration", _positive, 30.0, "seconds per set (default 30)")
-    _arg(tb, "--no-video", help="no MP4 of the rendered frames", action="store_true")
+    _arg(tb, "--no-video", help="no MP4 of the rendered frames", action="store_false", dest="video")
     no_studies = "skip the camera matrix (Tables 5-1/5-2) and the v_py sensitivity"
-    _arg(tb, "--no-studies", help=no_studies, action="store_true")
+    _arg(tb, "--no-studies", help=no_studies, action="store_false", dest="studies")
     _common(tb, "tables, estimates, figures and videos", None, "the texture's seed (0)")
 
     r = sub.add_parser("reproduce", help="every paper's main experiment and a summary")
@@ -217,7 +217,6 @@ def _call(a):
         fn = getattr(report, "reproduce" if a.command == "reproduce" else f"{a.command}_report")
     chosen, formats, path = (getattr(a, k, None) for k in ("set", "format", "data"))
     values = {**vars(a), "formats": formats, "sets": chosen, "variants": chosen, "path": path}
-    values.update(video=not vars(a).get("no_video"), studies=not vars(a).get("no_studies"))
     return fn(**{k: v for k, v in values.items() if k in inspect.signature(fn).parameters})
 
 

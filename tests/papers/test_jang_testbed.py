@@ -87,6 +87,7 @@ def test_static_set_end_to_end_through_the_command(tmp_path):
     assert main(argv + ["--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     entry = summary["sets"]["I.1"]
+    assert summary["settings"]["studies"] is False and summary["settings"]["video"] is True
     assert entry["units"] == "cm" and entry["thesis_rms"] == [0.0016, 0.0047, 0.0214]
     assert entry["feasible"] and entry["result"] == "successful"
     assert len(entry["rms"]) == 3 and all(isinstance(x, float) for x in entry["rms"])
