@@ -1,7 +1,14 @@
-"""Shared test helpers: tree comparison and finite differences."""
+"""Shared test helpers: tree comparison, finite differences, the outputs' schema check and
+the testbed's checks."""
+
+import json
 
 import jax
 import numpy as np
+import pandas as pd
+
+from visjax import __version__
+from visjax.io import ARRAYS, TABLES, read_summary
 
 
 def tree_allclose(a, b, *, rtol=1e-12, atol=0.0) -> bool:
@@ -16,14 +23,16 @@ def tree_allclose(a, b, *, rtol=1e-12, atol=0.0) -> bool:
 _BATCHED: dict = {}
 
 
-def central_difference(f, x, h):
-    """Central finite-difference Jacobian of `f` at `x`, all perturbations in one vmapped call."""
+def central_difference(f, x, h, *args):
+    """Central finite-difference Jacobian of `f(x, *args)` with respect to `x`, all
+    perturbations in one vmapped call (`args` held fixed: pass the constants as `args`, not
+    in a new closure, and one compiled program serves every point)."""
     x = np.asarray(x, dtype=np.float64)
     E = np.eye(x.size).reshape((x.size,) + x.shape) * h
-    fb = _BATCHED.get(f)
+    fb = _BATCHED.get((f, len(args)))
     if fb is None:  # compiled once per function (and shape), not once per call
-        fb = _BATCHED[f] = jax.jit(jax.vmap(f))
-    d = (np.asarray(fb(x + E)) - np.asarray(fb(x - E))) / (2 * h)  # (x.size, *out)
+        fb = _BATCHED[(f, len(args))] = jax.jit(jax.vmap(f, (0,) + (None,) * len(args)))
+    d = (np.asarray(fb(x + E, *args)) - np.asarray(fb(x - E, *args))) / (2 * h)  # (x.size, *out)
     return np.moveaxis(d, 0, -1).reshape(d.shape[1:] + x.shape)
 
 
@@ -65,3 +74,102 @@ def euclidean_scene_file(path, duration: float, rate_hz: float):
         x_c_nominal=np.asarray(x0),
         features=np.asarray(sc.omega_s),
     ).save(path)
+
+
+MAGIC = {".png": b"\x89PNG", ".pdf": b"%PDF", ".svg": b"<?xml"}
+
+
+def _schema_columns(relative: str):
+    """The documented columns of a table, by its folder and name."""
+    for name, columns in TABLES.items():
+        if name == relative or name.replace("reproduce ", "") == relative:
+            return columns
+    return None
+
+
+def _schema_arrays(relative: str):
+    for name, arrays in ARRAYS.items():
+        pattern = name.replace("<set>", "")
+        if name == relative or (
+            "<set>" in name and relative.startswith(pattern.split("_")[0] + "_")
+        ):
+            return {k.rstrip("?"): k.endswith("?") for k in arrays}
+    return None
+
+
+def check_outputs(results) -> dict:
+    """Every file under `results` loads (pandas, NumPy) and follows its documented schema;
+    returns the summaries' kinds by path."""
+    files = sorted(p for p in results.rglob("*") if p.is_file())
+    kinds = {}
+    for path in files:
+        rel = path.relative_to(results).as_posix()
+        suffix = path.suffix
+        if path.name == "summary.json":
+            series = read_summary(path)  # pandas, checked against its schema
+            assert series["visjax_version"] == __version__
+            assert isinstance(series["settings"], dict) and series["wall_time_s"] > 0
+            kinds[rel] = series["kind"]
+        elif suffix == ".json":
+            assert isinstance(json.loads(path.read_text()), dict), rel
+        elif suffix == ".parquet":
+            table = pd.read_parquet(path)
+            assert len(table) > 0, rel
+            columns = _schema_columns(rel)
+            if columns is not None:
+                assert list(table.columns) == list(columns), rel
+                for column, kind in columns.items():
+                    if kind == "float":
+                        assert pd.api.types.is_float_dtype(table[column]), (rel, column)
+                    elif kind == "int":
+                        assert pd.api.types.is_integer_dtype(table[column]), (rel, column)
+        elif suffix == ".csv":
+            assert len(pd.read_csv(path)) > 0, rel
+        elif suffix == ".npz":
+            with np.load(path) as data:
+                expected = _schema_arrays(rel)
+                if expected is not None:
+                    required = {k for k, optional in expected.items() if not optional}
+                    assert required <= set(data.files) <= set(expected), (rel, data.files)
+                t = data["t"] if "t" in data.files else data["ts"]
+                assert t.ndim == 1 and np.all(np.diff(t) > 0), rel
+                for key in data.files:
+                    if data[key].dtype.kind == "f" and data[key].shape[:1] == t.shape:
+                        assert data[key].shape[0] == t.shape[0], (rel, key)
+        elif suffix in MAGIC:
+            assert path.read_bytes()[:5].startswith(MAGIC[suffix]), rel
+        elif suffix == ".mp4":
+            assert path.stat().st_size > 1000, rel
+        else:
+            raise AssertionError(f"an output with no documented format: {rel}")
+    return kinds
+
+
+def twin_kinematics_residual(run, v_p):
+    """max |dr/dt - (2.5)| at the camera samples: r the truth in the camera frame, u the
+    camera's commanded velocities, v_p the marker's velocity in the camera frame (m/s)."""
+    r, dt = run.position, run.ts[1] - run.ts[0]
+    k = run.frame_index[1:-1]
+    r_dot = (r[k + 1] - r[k - 1]) / (2 * dt)
+    X, Y, Z = r[k].T
+    u = run.velocity_true[1:-1]
+    vcx, vcy, vcz, wx, wy, wz = u.T
+    vp = v_p(run.ts[k])
+    model = np.stack(
+        [
+            vp[:, 0] - vcx + wz * Y - wy * Z,  # eq. (2.5)
+            vp[:, 1] - vcy + wx * Z - wz * X,
+            vp[:, 2] - vcz + wy * X - wx * Y,
+        ],
+        axis=1,
+    )
+    return np.abs(r_dot - model).max()
+
+
+def check_testbed_tracking(r):
+    """The testbed twin's marker tracked within 0.5 px and the UIO from tracked pixels within
+    2x of the UIO from exact ones."""
+    assert r.tracking_rms_px < 0.5
+    assert np.all(np.isfinite(r.pixels))
+    assert np.linalg.norm(r.rms) < 2 * np.linalg.norm(r.rms_ideal)
+    assert np.all(np.isfinite(r.estimate)) and np.all(np.isfinite(r.rms_frames))

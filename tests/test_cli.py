@@ -1,10 +1,13 @@
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import visjax
+from tests.helpers import check_outputs, check_testbed_tracking, twin_kinematics_residual
 from visjax.cli import build_parser, main
 from visjax.io import read_summary
 from visjax.papers.chitrakaran import K_EQ63
@@ -13,6 +16,53 @@ from visjax.papers.chitrakaran import K_EQ63
 def _summary(folder) -> dict:
     """A command's summary.json, loaded with pandas and checked against its schema."""
     return read_summary(Path(folder) / "summary.json").to_dict()
+
+
+# The commands' end-to-end tests share the small settings of `reproduce`'s smoke test (its
+# jobs are the commands), and stay in this module: `pytest --dist loadfile` runs a module
+# in one worker, so each job is traced and compiled once for all of them.
+TESTBED_S = 4.0
+
+
+def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatch, capsys):
+    """`visjax reproduce` on the small settings of the commands' tests below (the full
+    `--quick` run is a slow test of `tests/test_outputs.py`): every job runs, every output
+    follows its schema, and the table has one number per row."""
+    import functools
+
+    from visjax import report
+
+    small = {
+        "geometry_scenes": (5, 5),
+        "structure_duration_s": (2.0, 2.0),
+        "euclidean_duration_s": (2.0, 2.0),
+        "testbed_sets": (["I.1"], ["I.1"]),
+        "testbed_duration_s": (TESTBED_S, TESTBED_S),
+        "testbed_studies": (False, False),
+    }
+    monkeypatch.setattr(report, "QUICK", small)
+    monkeypatch.setattr(
+        report, "velocity_report", functools.partial(report.velocity_report, duration=1.0)
+    )
+    monkeypatch.setattr(
+        report, "moving_point_report",
+        functools.partial(report.moving_point_report, sets=["I.1", "II.2"]),
+    )  # fmt: skip
+    out = tmp_path / "results"
+    assert main(["reproduce", "--quick", "--quiet", "--format", "png", "--out", str(out)]) == 0
+    kinds = check_outputs(out)
+    assert sorted(kinds.values()) == sorted(
+        ["reproduce", "velocity", "geometry", "structure", "euclidean", "testbed"]
+    )
+    # the settings name the folder the user asked for, not the staging folder written first
+    assert read_summary(out / "summary.json")["settings"]["out"] == str(out)
+    table = pd.read_parquet(out / "summary.parquet")
+    assert table["value"].dtype == np.float64 and len(table) >= 6
+    # the reference is a number, its kind in its own column
+    assert table["reference"].dtype == np.float64 and table["reference"].notna().all()
+    assert set(table["reference_kind"]) <= {"published", "truth", "bound", "OpenCV"}
+    assert table.loc[table["what"].str.contains("z1"), "reference_kind"].tolist() == ["truth"]
+    assert "summary" in capsys.readouterr().out
 
 
 def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
@@ -133,7 +183,7 @@ def test_structure_command(tmp_path, capsys):
                 "--set",
                 "II.2",
                 "--duration",
-                "10",
+                "2",
                 "--quiet",
                 "--out",
                 str(tmp_path),
@@ -155,12 +205,12 @@ def test_structure_command(tmp_path, capsys):
 def test_euclidean_command(tmp_path, capsys):
     """Two noise seeds, vector figures only: the final errors are the seeds' medians (of two:
     their mean), each seed's beside them, and the estimates over time have a seed axis."""
-    argv = ["euclidean", "--duration", "3", "--noise", "0.3", "--seeds", "2"]
+    argv = ["euclidean", "--duration", "2", "--noise", "0.3", "--seeds", "2"]
     assert main([*argv, "--quiet", "--format", "svg,pdf", "--out", str(tmp_path)]) == 0
     assert "final position error" in capsys.readouterr().out
     summary = _summary(tmp_path)
     assert len(summary["final_position_error_m"]) == 4 and summary["seeds"] == 2
-    assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 3 s in
+    assert max(summary["final_position_error_m"]) < 0.2  # from 10-16 cm, 2 s in
     per_seed = np.array(summary["final_position_error_m_seeds"])
     np.testing.assert_allclose(summary["final_position_error_m"], per_seed.mean(0), rtol=1e-12)
     # vector figures only, as asked; the estimates over time beside the truth
@@ -398,3 +448,45 @@ def test_noise_seeds_give_medians_and_the_spread(tmp_path, capsys):
             main(bad)
     err = capsys.readouterr().err
     assert "needs --noise above 0" in err and "not to --data" in err
+
+
+def test_testbed_command(tmp_path):
+    """`visjax testbed` end to end on set I.1: the PUMA's camera follows the set, the
+    marker is tracked, the observer runs on the tracked pixels."""
+    out = tmp_path / "tb"
+    argv = ["testbed", "--set", "I.1", "--duration", str(TESTBED_S), "--no-studies"]
+    assert main(argv + ["--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    entry = summary["sets"]["I.1"]
+    assert summary["settings"]["studies"] is False and summary["settings"]["video"] is True
+    assert entry["units"] == "cm" and entry["thesis_rms"] == [0.0016, 0.0047, 0.0214]
+    assert entry["feasible"] and entry["result"] == "successful"
+    assert len(entry["rms"]) == 3 and all(isinstance(x, float) for x in entry["rms"])
+    for name in ("testbed_I.1.png", "testbed_I.1.mp4", "testbed_I.1.npz"):
+        assert (out / name).stat().st_size > 1000
+    table = pd.read_csv(out / "tables.csv")
+    assert list(table["axis"]) == ["x", "y", "z"]
+    assert list(table["thesis_rms_m"]) == [0.0016, 0.0047, 0.0214]
+    np.testing.assert_allclose(table["rms_m"], entry["rms"], rtol=1e-12)
+    with np.load(out / "testbed_I.1.npz") as z:
+        r = SimpleNamespace(**{k: z[k] for k in z.files})
+    assert r.estimate.shape[1] == 3 and r.pixels.shape[1] == 2
+    # the PUMA's camera really moves with the set's velocities (inverse velocity
+    # kinematics integrated, forward kinematics read back)
+    assert twin_kinematics_residual(r, lambda t: np.zeros((len(t), 3))) < 1e-7
+    np.testing.assert_allclose(r.position[:, 2], 0.80, atol=1e-6)  # the table is level
+    # the encoders: a count of 2.4e-5 rad over one camera period, plus half a period's lag
+    assert np.abs(r.velocity_measured - r.velocity_true).max() < 3e-3
+    check_testbed_tracking(
+        SimpleNamespace(
+            tracking_rms_px=entry["tracking_rms_px"],
+            pixels=r.pixels,
+            rms=np.array(entry["rms"]),
+            rms_ideal=np.array(entry["rms_ideal_pixels"]),
+            estimate=r.estimate,
+            rms_frames=np.array(entry["rms_frames"]),
+        )
+    )
+    with pytest.raises(SystemExit) as e:
+        main(["testbed", "--set", "IX", "--out", str(tmp_path / "x")])
+    assert e.value.code == 2 and not (tmp_path / "x").exists()

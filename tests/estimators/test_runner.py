@@ -367,7 +367,7 @@ def test_unrolled_loop_gives_the_same_run(saveat):
     est = LinearObserver(a=1.5, b=[1.0, -0.5])
     red = WindowRMS(0.2, 0.8)
     plain = run(est, stream, saveat=saveat, reducer=red)
-    for unroll in (2, 8, 200):
+    for unroll in (3, 200):  # neither divides the 102 steps; 200 holds them all
         sol = run(est, stream, saveat=saveat, reducer=red, unroll=unroll)
         np.testing.assert_allclose(sol.outputs, plain.outputs, rtol=1e-15, atol=1e-300)
         np.testing.assert_allclose(sol.summary.rms, plain.summary.rms, rtol=1e-15)
@@ -380,6 +380,8 @@ def test_unrolled_loop_gives_the_same_run(saveat):
     assert ref.result == RESULTS.diverged and sol.result == ref.result
     assert int(sol.failed_sample) == int(ref.failed_sample) == 50
     np.testing.assert_allclose(sol.final_state, ref.final_state, rtol=1e-15)
+    if saveat.every == 1:
+        return  # the gradient once, with decimated saving (the more intricate case)
     # vmap over gains and the gradient, both adjoints
     gains = jnp.array([0.7, 1.5, 2.5])
 
@@ -391,6 +393,7 @@ def test_unrolled_loop_gives_the_same_run(saveat):
     for adjoint in (DirectAdjoint(), CheckpointAdjoint(9)):
         grads = [jax.vmap(jax.grad(loss), (0, None, None))(gains, u, adjoint) for u in (1, 4)]
         np.testing.assert_allclose(grads[1], grads[0], rtol=1e-13)
+        assert np.all(np.isfinite(grads[0])) and np.all(grads[0] != 0)
     with pytest.raises(ValueError, match="`unroll` must be a positive int"):
         run(est, stream, unroll=0)
 

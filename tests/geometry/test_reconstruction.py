@@ -72,15 +72,26 @@ def _flat(rec):
     return jnp.concatenate([rec.R_bar.ravel(), rec.x_h, rec.n_star, rec.alpha, rec.g33[None]])
 
 
+def _flat_general(p_cur, p_ref, A, prior):
+    return _flat(_general(p_ref, p_cur, A, prior))
+
+
+def _flat_known(p_cur, p_ref, A, n_star):
+    return _flat(_known(p_ref, p_cur, A, n_star))
+
+
+# each Jacobian with respect to the current pixels compiled once, reused at every point
+_jacobians = {f: jax.jit(jax.jacrev(f)) for f in (_flat_general, _flat_known)}
+
+
 def test_gradient_matches_finite_differences(scenes):
     p_ref, p_cur, A, prior = scenes.p_ref[5], scenes.p_cur[5], scenes.A[5], scenes.n_star[5]
-    for f in (
-        lambda pc: _flat(_general(p_ref, pc, A, prior)),
-        lambda pc: _flat(_known(p_ref, pc, A, prior)),
-    ):
-        J = jax.jit(jax.jacrev(f))(p_cur)
+    for f, jac in _jacobians.items():
+        J = jac(p_cur, p_ref, A, prior)
         assert np.all(np.isfinite(J))
-        np.testing.assert_allclose(J, central_difference(f, p_cur, 1e-4), atol=1e-8)
+        np.testing.assert_allclose(
+            J, central_difference(f, p_cur, 1e-4, p_ref, A, prior), atol=1e-8
+        )
 
 
 def test_gradient_at_identity_and_symmetric_square():
@@ -88,27 +99,24 @@ def test_gradient_at_identity_and_symmetric_square():
     A = np.array([[1268.16, 0.0, 257.49], [0.0, 1267.50, 253.10], [0.0, 0.0, 1.0]])  # eq. (62)
     p_ref = np.array([[193.5, 189.1], [321.5, 189.1], [321.5, 317.1], [193.5, 317.1]])
     n_star = np.array([0.0, 0.0, 1.0])
-    f_known = lambda pc: _flat(_known(p_ref, pc, A, n_star))  # noqa: E731
-    f_general = lambda pc: _flat(_general(p_ref, pc, A, n_star))  # noqa: E731
+    args = (p_ref, A, n_star)
     rec = _general(p_ref, p_ref, A, n_star)
     np.testing.assert_allclose(rec.R_bar, np.eye(3), atol=1e-14)
     np.testing.assert_allclose(rec.x_h, 0.0, atol=1e-14)
     np.testing.assert_allclose(rec.alpha, 1.0, rtol=1e-14)
-    # each Jacobian compiled once and reused at both points
-    jac = {f: jax.jit(jax.jacrev(f)) for f in (f_known, f_general)}
     # known-normal path: smooth, so the derivative at the identity matches differences
-    J = jac[f_known](p_ref)
-    np.testing.assert_allclose(J, central_difference(f_known, p_ref, 1e-4), atol=1e-8)
-    np.testing.assert_allclose(jax.jit(jax.jacfwd(f_known))(p_ref), J, atol=1e-12)
+    J = _jacobians[_flat_known](p_ref, *args)
+    np.testing.assert_allclose(J, central_difference(_flat_known, p_ref, 1e-4, *args), atol=1e-8)
+    np.testing.assert_allclose(jax.jit(jax.jacfwd(_flat_known))(p_ref, *args), J, atol=1e-12)
     # general path: not differentiable at the identity (the normal is undefined), but finite
-    assert np.all(np.isfinite(jac[f_general](p_ref)))
+    assert np.all(np.isfinite(_jacobians[_flat_general](p_ref, *args)))
     # away from the identity on the same square target, both match differences
     H = np.asarray(so3_exp(jnp.array([0.02, -0.03, 0.1]))) + np.outer([0.05, 0.02, -0.04], n_star)
     q = np.c_[p_ref, np.ones(4)] @ (A @ H @ np.linalg.inv(A)).T
     p_cur = q[:, :2] / q[:, 2:]
-    for f in (f_known, f_general):
-        J = jac[f](p_cur)
-        np.testing.assert_allclose(J, central_difference(f, p_cur, 1e-4), atol=1e-8)
+    for f, jac in _jacobians.items():
+        J = jac(p_cur, *args)
+        np.testing.assert_allclose(J, central_difference(f, p_cur, 1e-4, *args), atol=1e-8)
 
 
 def test_near_pi_rotation_and_tiny_rotation():

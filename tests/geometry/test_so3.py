@@ -62,36 +62,40 @@ def test_log_matches_scipy():
     np.testing.assert_allclose(jax.vmap(log_j)(R), Rotation.from_matrix(R).as_rotvec(), atol=1e-13)
 
 
+def _log_exp(w):
+    return so3_log(so3_exp(w))
+
+
+# each derivative compiled once (not dispatched op by op), evaluated at every point
+_JACFWD = {f: jax.jit(jax.jacfwd(f)) for f in (so3_exp, _log_exp, L_omega, L_omega_inv)}
+_JACREV = {f: jax.jit(jax.jacrev(f)) for f in _JACFWD}
+
+
 def test_gradients_finite_at_identity_and_match_finite_differences():
     zero = jnp.zeros(3)
-    for f in (so3_exp, lambda w: so3_log(so3_exp(w)), L_omega, L_omega_inv):
-        J = jax.jacfwd(f)(zero)
-        assert np.all(np.isfinite(J))
-        assert np.all(np.isfinite(jax.jacrev(f)(zero)))
+    for f in _JACFWD:
+        assert np.all(np.isfinite(_JACFWD[f](zero)))
+        assert np.all(np.isfinite(_JACREV[f](zero)))
     # log(exp(w)) = w: the Jacobian is the identity at and near 0
-    np.testing.assert_allclose(jax.jacrev(lambda w: so3_log(so3_exp(w)))(zero), np.eye(3))
+    np.testing.assert_allclose(_JACREV[_log_exp](zero), np.eye(3))
     tiny = 1e-7 * np.array([0.3, -0.8, 0.5])
-    np.testing.assert_allclose(
-        jax.jacrev(lambda w: so3_log(so3_exp(w)))(tiny), np.eye(3), atol=1e-12
-    )
+    np.testing.assert_allclose(_JACREV[_log_exp](tiny), np.eye(3), atol=1e-12)
     # exp: d exp(w) / dw at 0 is the generators
-    J = jax.jacfwd(so3_exp)(zero)
+    J = _JACFWD[so3_exp](zero)
     for i in range(3):
         np.testing.assert_allclose(J[:, :, i], skew(np.eye(3)[i]), atol=1e-15)
     # elsewhere, against central differences, and forward == reverse
     w = np.array([0.4, -1.1, 0.7])
-    for f in (so3_exp, so3_log, L_omega, L_omega_inv):
-        g = (lambda x: f(so3_exp(x))) if f is so3_log else f
-        fd = central_difference(g, w, 1e-6)
-        np.testing.assert_allclose(jax.jacfwd(g)(w), fd, atol=1e-8)
-        np.testing.assert_allclose(jax.jacrev(g)(w), jax.jacfwd(g)(w), atol=1e-13)
+    for f in _JACFWD:
+        fd = central_difference(f, w, 1e-6)
+        np.testing.assert_allclose(_JACFWD[f](w), fd, atol=1e-8)
+        np.testing.assert_allclose(_JACREV[f](w), _JACFWD[f](w), atol=1e-13)
 
 
 def test_log_gradient_near_pi_matches_finite_differences():
     w = (np.pi - 1e-3) * np.array([0.0, 0.6, 0.8])
-    g = lambda x: so3_log(so3_exp(x))  # noqa: E731
-    np.testing.assert_allclose(jax.jacfwd(g)(w), np.eye(3), atol=1e-8)
-    np.testing.assert_allclose(jax.jacrev(g)(w), np.eye(3), atol=1e-8)
+    np.testing.assert_allclose(_JACFWD[_log_exp](w), np.eye(3), atol=1e-8)
+    np.testing.assert_allclose(_JACREV[_log_exp](w), np.eye(3), atol=1e-8)
 
 
 def test_sinc():

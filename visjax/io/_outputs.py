@@ -3,7 +3,8 @@ and the columns of every table the commands write.
 
 Every `summary.json` is one JSON object, strict JSON (a non-finite number is `null`),
 numbers stored as numbers. It loads with `json.load`, and with pandas as a Series
-(`pandas.read_json(path, typ="series")`, nested objects kept as Python values) or one row
+(`pandas.read_json(path, typ="series", precise_float=True)`, nested objects kept as
+Python values; without `precise_float` pandas rounds the last digits) or one row
 (`pandas.json_normalize(json.load(f))`). Its key `kind` names its schema in `SUMMARIES`;
 every summary has the keys of `COMMON` (the visjax version, the settings, the seed, the wall
 time). Tables are Parquet files (and CSV where a spreadsheet is handy) with the columns of
@@ -369,7 +370,8 @@ def read_summary(path):
     import pandas as pd
 
     validate_summary(json.loads(Path(path).read_text()))
-    return pd.read_json(path, typ="series")
+    # precise_float: pandas' fast float parser rounds the last digits of what json wrote
+    return pd.read_json(path, typ="series", precise_float=True)
 
 
 def schema_markdown() -> str:
