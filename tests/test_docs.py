@@ -91,6 +91,7 @@ def _public_names() -> dict[str, set[str]]:
     return names
 
 
+@pytest.mark.slow  # the documentation build: the second command (.ci/run)
 def test_site_builds_strict_with_every_public_name(site):
     """The strict build succeeds (the fixture), and the API reference has an entry (an
     anchor `id="visjax.<module>.<name>"`) for every public name and for each result code

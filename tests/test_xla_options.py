@@ -72,6 +72,7 @@ def test_apply_after_the_backend_started_warns_and_changes_nothing():
     assert _python(code).split() == ["None", "1", "True"]
 
 
+@pytest.mark.slow  # a subprocess batched sweep: the second command (.ci/run)
 def test_sweep_warns_when_the_configuration_can_hang():
     """On jaxlib 0.10 on the CPU without the scheduler option, a batched sweep warns once."""
     code = (
@@ -92,6 +93,7 @@ def test_sweep_warns_when_the_configuration_can_hang():
     assert _python("import visjax; visjax.apply_xla_cpu_workarounds()\n" + code).strip() == "0"
 
 
+@pytest.mark.slow  # a subprocess hang check: the second command (.ci/run)
 def test_no_xla_cpu_deadlock_with_several_batched_lapack_calls():
     """Two batched inverses in one program hang XLA's CPU runtime (jaxlib 0.10) within a
     few calls at batch 1,000 unless the scheduler option is set; with

@@ -228,6 +228,7 @@ def _last_json(proc):
     return json.loads(out.strip().splitlines()[-1])
 
 
+@pytest.mark.slow  # a multi-device subprocess: the second command (.ci/run)
 def test_sharded_over_four_host_devices_equals_unsharded():
     code = _SHARDED.format(setup="", root=_ROOT)
     r = _last_json(_python(code, {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"}))
