@@ -8,6 +8,7 @@ For the well-conditioned matrices they serve (intrinsics, rotations, normalised
 homographies) they agree with the LU results to a few ulps.
 """
 
+import functools
 import math
 
 import jax
@@ -122,6 +123,13 @@ def _reduce(x, axis, op, fallback):
         x, axis = x.reshape(-1), 0
     if x.shape[axis] > _UNROLL:
         return fallback(x, axis=axis)
+    # one program per shape: outside `jit` (or under an eager `vmap` or `grad`) not one
+    # compiled slice per entry; inside `jit` its trace is cached and inlined
+    return _unrolled(x, axis, op)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def _unrolled(x, axis, op):
     parts = [jax.lax.index_in_dim(x, k, axis, keepdims=False) for k in range(x.shape[axis])]
     out = parts[0]
     for q in parts[1:]:

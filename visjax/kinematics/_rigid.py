@@ -8,11 +8,26 @@ the fixed frame $\\mathcal I$.
 from collections.abc import Callable
 
 import diffrax
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._util import as_float, check_shape
 from ..geometry import skew
+
+
+class _PoseField(eqx.Module):
+    """$(\\dot x, \\dot R) = (v, [\\omega]_\\times R)$ of a twist `velocity(t)`. A Module, so that
+    diffrax's compiled solve is reused by every call with an equal `velocity` (a Module's
+    arrays are arguments of the compiled program; a new Python closure would compile it
+    again)."""
+
+    velocity: Callable
+
+    def __call__(self, t, y, args):
+        x, R = y
+        v = self.velocity(t)
+        return (v[:3], skew(v[3:]) @ R)
 
 
 def integrate_pose(
@@ -44,15 +59,10 @@ def integrate_pose(
     check_shape(R0, (3, 3), "R0")
     check_shape(ts, (None,), "ts")
 
-    def field(t, y, args):
-        x, R = y
-        v = velocity(t)
-        return (v[:3], skew(v[3:]) @ R)
-
     floor = 100.0 * float(jnp.finfo(jnp.result_type(x0, R0, ts)).eps)
     rtol, atol = max(rtol, floor), max(atol, floor)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
+        diffrax.ODETerm(_PoseField(velocity)),
         diffrax.Dopri8(),
         ts[0],
         ts[-1],

@@ -4,6 +4,7 @@ measured velocity, and a camera mounted on a moving platform."""
 from collections.abc import Callable
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -51,6 +52,17 @@ def platform_camera_pixels(
     return jax.vmap(one)(R_b, x_b)
 
 
+class _PerspectiveField(eqx.Module):
+    """Jang's thesis, eq. (2.11), with the camera's and the point's velocities of time (a
+    Module: diffrax's compiled solve is reused by every call with equal velocities)."""
+
+    camera_twist: Callable
+    point_velocity: Callable
+
+    def __call__(self, t, x, args):
+        return perspective_dynamics(x, self.camera_twist(t), self.point_velocity(t))
+
+
 def moving_camera_point(
     camera_twist: Callable[[Array], Array],
     point_velocity: Callable[[Array], Array],
@@ -67,11 +79,8 @@ def moving_camera_point(
     ts, x0 = as_float(ts), as_float(x0)
     check_shape(x0, (3,), "x0")
 
-    def field(t, x, args):
-        return perspective_dynamics(x, camera_twist(t), point_velocity(t))  # eq. (2.11)
-
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
+        diffrax.ODETerm(_PerspectiveField(camera_twist, point_velocity)),
         diffrax.Dopri8(),
         ts[0],
         ts[-1],

@@ -38,6 +38,34 @@ class JointTrajectory(eqx.Module):
     failed_sample: Int[Array, ""]
 
 
+# Modules rather than closures: diffrax's compiled solve is reused by every call with the
+# same chain, twist (if it is itself a Module or a module-level function) and lengths.
+
+
+class _JointField(eqx.Module):
+    chain: SerialChain
+    twist: Callable
+    local: bool = eqx.field(static=True)
+
+    def __call__(self, t, q, args):
+        return self.chain.inverse_velocity(q, self.twist(t), local=self.local, throw=False).qdot
+
+
+class _SigmaMin(eqx.Module):
+    chain: SerialChain
+
+    def __call__(self, q):
+        return self.chain.inverse_velocity(q, jnp.zeros(6, q.dtype), throw=False).sigma_min
+
+
+class _Singular(eqx.Module):
+    sigma_min: _SigmaMin
+    threshold: float
+
+    def __call__(self, t, q, args, **kwargs):
+        return ~(self.sigma_min(q) >= self.threshold)
+
+
 def follow_tool_twist(
     chain: SerialChain,
     q0: Float[ArrayLike, "6"],
@@ -67,17 +95,12 @@ def follow_tool_twist(
     check_shape(q0, (chain.n_joints,), "q0")
     check_shape(ts, (None,), "ts")
 
-    def field(t, q, args):
-        return chain.inverse_velocity(q, twist(t), local=local, throw=False).qdot
-
-    def sigma_min(q):
-        return chain.inverse_velocity(q, jnp.zeros(6, q.dtype), throw=False).sigma_min
-
+    sigma_min = _SigmaMin(chain)
     # stop at the first singular configuration: near it the joint rates grow without bound
     # and an adaptive solver would take ever smaller steps
-    event = diffrax.Event(lambda t, q, args, **kwargs: ~(sigma_min(q) >= min_singular_value))
+    event = diffrax.Event(_Singular(sigma_min, min_singular_value))
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
+        diffrax.ODETerm(_JointField(chain, twist, local)),
         diffrax.Dopri8(),
         ts[0],
         ts[-1],
@@ -149,6 +172,18 @@ def encoder_twist(
     return jax.vmap(lambda q, qd: chain.tool_twist(q, qd, local=local))(qm, qdot)
 
 
+class _PlanarField(eqx.Module):
+    v: Callable
+    omega: Array
+    t_ref: Array
+
+    def __call__(self, t, c, args):
+        psi = self.omega * (t - self.t_ref)
+        cs, sn = jnp.cos(psi), jnp.sin(psi)
+        vt = self.v(t)
+        return jnp.stack([cs * vt[0] - sn * vt[1], sn * vt[0] + cs * vt[1]])
+
+
 def planar_path(
     v: Callable[[Array], Array],
     omega: Float[ArrayLike, ""],
@@ -167,14 +202,8 @@ def planar_path(
     check_shape(ts, (None,), "ts")
     omega, t_ref = as_float(omega), as_float(t_ref)
 
-    def field(t, c, args):
-        psi = omega * (t - t_ref)
-        cs, sn = jnp.cos(psi), jnp.sin(psi)
-        vt = v(t)
-        return jnp.stack([cs * vt[0] - sn * vt[1], sn * vt[0] + cs * vt[1]])
-
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
+        diffrax.ODETerm(_PlanarField(v, omega, t_ref)),
         diffrax.Dopri8(),
         ts[0],
         ts[-1],

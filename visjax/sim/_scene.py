@@ -78,10 +78,20 @@ def sinusoidal_trajectory(
         check_shape(v, (6,), name)
     x0, R0 = _pose_args(x0, R0)
 
-    def twist(t):
-        return a * jnp.sin(2.0 * jnp.pi * f * t + ph) + c
+    return integrate_twist(_SinusoidalTwist(a, f, ph, c), x0, R0, ts)
 
-    return integrate_twist(twist, x0, R0, ts)
+
+class _SinusoidalTwist(eqx.Module):
+    """$a \\sin(2\\pi f t + \\varphi) + c$ (a Module: the compiled integration is shared by
+    every sinusoidal trajectory of the same length)."""
+
+    a: Array
+    f: Array
+    ph: Array
+    c: Array
+
+    def __call__(self, t):
+        return self.a * jnp.sin(2.0 * jnp.pi * self.f * t + self.ph) + self.c
 
 
 def _natural_spline_slopes(knots, values):
