@@ -105,19 +105,15 @@ def run_command(
     started = time.perf_counter()
     settings = _settings(locals())
     command_x64()
-    import equinox as eqx
     import jax
 
     from ._results import result_names
-    from .studies import as_json
+    from .studies import as_json, solution
 
     results = {}
     for tag, p in problems(problem, data, noise, duration, rate, variants, every=False):
         m = p.check_method(method)
-        params = p.resolve()
-        inputs = p.inputs(jax.random.key(seed))
-        solve = eqx.filter_jit(lambda x, p=p, m=m: p.solve(m, params, x, outputs=True))
-        sol = jax.block_until_ready(solve(inputs))
+        sol = jax.block_until_ready(solution(p, None, seed, method=m))
         code = result_names(sol.result)
         values = jax.tree_util.tree_map(np.asarray, p.metrics(m, sol))
         ok = code == "successful" and all(np.all(np.isfinite(v)) for v in values.values())

@@ -103,6 +103,35 @@ def test_evaluate_matches_hand_computation_jit_vmap_grad():
     np.testing.assert_allclose(jax.grad(loss)(2.0), fd, rtol=1e-6)
 
 
+def test_solution_is_one_run_of_evaluate_jit_vmap_grad():
+    p = toy()
+    sol = studies.solution(p, {"gain": 2.0}, 1)
+    np.testing.assert_allclose(
+        abs(float(sol.value) - p.truth), by_hand(p, 2.0, (0.0, 0.0), 1), rtol=1e-12
+    )
+    same_key = studies.solution(p, {"gain": 2.0}, jax.random.key(1))
+    assert float(same_key.value) == float(sol.value)
+    ev = studies.evaluate(p, {"gain": 2.0}, jnp.array([1]))
+    np.testing.assert_allclose(ev.metrics["error"][0], abs(float(sol.value) - 2.0), rtol=1e-12)
+    assert float(studies.solution(p, None, 1, method="baseline").value) == pytest.approx(
+        float(jnp.mean(p.inputs(jax.random.key(1)))), rel=1e-12
+    )
+
+    def value(gain):
+        return studies.solution(p, {"gain": gain}, 1).value
+
+    np.testing.assert_allclose(jax.jit(value)(2.0), sol.value, rtol=1e-12)
+    np.testing.assert_allclose(jax.vmap(value)(jnp.array([0.5, 2.0]))[1], sol.value, rtol=1e-12)
+    h = 1e-6
+    np.testing.assert_allclose(
+        jax.grad(value)(2.0), (value(2.0 + h) - value(2.0 - h)) / (2 * h), rtol=1e-6
+    )
+    with pytest.raises(ValueError, match="`key` must be"):
+        studies.solution(p, None, -1)
+    with pytest.raises(ValueError, match="unknown method"):
+        studies.solution(p, None, 0, method="ekf")
+
+
 def test_failed_runs_flagged_never_scored():
     p = toy(limit=2.0)  # a positive offset pushes the estimate past the limit
     ev = studies.evaluate(p, {"offset": 0.5}, jnp.arange(2))

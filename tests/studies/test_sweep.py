@@ -154,6 +154,30 @@ def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
     np.testing.assert_allclose(m16["rms"], one({}, key)["rms"], rtol=1e-10, atol=0)
 
 
+def test_velocity_constants_from_the_calibration_or_from_each_draw(velocity):
+    """`constants="calibration"`: n* and z1* from the noise-free frames, shared by every
+    draw; `"per_draw"`: measured from each draw's noisy frames with the known length (the
+    square's diagonal), as `fixed_camera` measures them."""
+    from visjax.estimators import fixed_camera
+
+    per_draw = papers.velocity_problem(noise_px=0.1, duration=2.0, constants="per_draw")
+    assert per_draw.known_length[:2] == (0, 2) and per_draw.known_length == velocity.known_length
+    inputs = per_draw.inputs(jax.random.key(3))
+    measured = per_draw.camera(inputs)
+    ref = fixed_camera(
+        inputs["pixels"], per_draw.A, per_draw.R_star, per_draw.s1,
+        known_length=per_draw.known_length,
+    )  # fmt: skip
+    np.testing.assert_allclose(measured.z1_star, ref.z1_star, rtol=1e-12)
+    np.testing.assert_allclose(measured.n_star, ref.n_star, rtol=1e-12, atol=1e-15)
+    calibration = velocity.camera(inputs)
+    assert float(calibration.z1_star) == float(velocity.z1_star)
+    assert abs(float(velocity.z1_star) - 1.99) < 1e-9  # the truth, eq. (60)-(61)
+    assert 1e-7 < abs(float(measured.z1_star) - 1.99) < 0.05  # the noise moves it, a little
+    with pytest.raises(ValueError, match="constants"):
+        papers.velocity_problem(duration=2.0, constants="noisy")
+
+
 @pytest.mark.slow
 def test_tune_lowers_velocity_loss_tenfold_and_gradients(velocity):
     keys = jnp.arange(2)

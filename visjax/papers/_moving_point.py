@@ -251,6 +251,7 @@ def moving_point_problem(
     duration: float = 20.0,
     window_s: float = 1.0,
     adjoint: AbstractAdjoint | None = None,
+    Kc_observer=None,
 ) -> MovingPointProblem:
     """The `moving_point` problem (`MovingPointProblem`) on the simulated analogue of a
     thesis set (`variant`, default `"I.1"`, a static point; `duration` s) or on a
@@ -262,15 +263,21 @@ def moving_point_problem(
     moving in 3-D is not determined by the images (the family
     $(\\lambda P_0, \\lambda V + (1-\\lambda)v_c)$ fits them all): the triangulation
     reports `singular`; the observer resolves it with what it knows of the unknown input's
-    direction $D$ (eq. (3.1))."""
+    direction $D$ (eq. (3.1)).
+
+    `Kc_observer`: on a thesis set, the camera matrix the observer normalises the pixels
+    with (default the thesis' refined least-squares one, which is also the simulated
+    camera's: `jang.KC_REFINED`); a file carries its own."""
     from ..sim import sample_times
     from . import jang
 
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
     if data is not None:
-        if variant is not None:
-            raise ValueError("a thesis set (`variant`) and a data file exclude each other.")
+        if variant is not None or Kc_observer is not None:
+            raise ValueError(
+                "a thesis set (`variant`, `Kc_observer`) and a data file exclude each other."
+            )
         from ..io import MovingPointData
 
         d = MovingPointData.load(data)
@@ -307,7 +314,9 @@ def moving_point_problem(
     set_name = "I.1" if variant is None else variant
     if set_name not in jang.SETS:
         raise ValueError(f"unknown set {set_name!r}; choose from {list(jang.SETS)}.")
-    sc = jang.scenario(set_name, duration)
+    sc = jang.scenario(
+        set_name, duration, Kc_observer=jang.KC_REFINED if Kc_observer is None else Kc_observer
+    )
     interval = float(np.median(np.diff(np.asarray(sc.frame_ts))))
     return MovingPointProblem(
         ts=sc.ts,

@@ -17,13 +17,16 @@ from ..studies import AbstractProblem, Parameter
 class FinalEstimate(eqx.Module):
     """A method's solution on the `static_points` problem: `result`, `failed_sample`,
     `omega_s` (n, 3) the final estimate of the unknown features' world positions, and,
-    when asked for (`outputs=True`), `ts` and `outputs` (the method's saved outputs)."""
+    when asked for (`outputs=True`), `ts` and `outputs` (the method's saved outputs) and,
+    for the estimator, `diagnostics` (its saved `StaticPointsDiagnostics`: prediction
+    errors, depths, the information rate, $\\lambda_{\\min}(\\Gamma_c)$, resets)."""
 
     result: Any
     failed_sample: Any
     omega_s: Any
     ts: Any = None
     outputs: Any = None
+    diagnostics: Any = None
 
 
 class StaticPointsProblem(AbstractProblem):
@@ -115,13 +118,14 @@ class StaticPointsProblem(AbstractProblem):
                 est,
                 (a * est.alpha_c, a * est.alpha, g * est.eta0, g * est.eta1, g * est.gamma_s0),
             )
-            interval = float(np.max(np.diff(np.asarray(self.ts))))
+            # saved at the sample rate, at most 100 Hz
+            interval = max(float(np.max(np.diff(np.asarray(self.ts)))), 0.01)
             every = max(1, int(round(interval / (self.dt or interval))))
             sol = run(
                 est,
                 stream,
                 dt=self.dt,
-                saveat=SaveAt(every=every, outputs=outputs),
+                saveat=SaveAt(every=every, outputs=outputs, diagnostics=outputs),
                 adjoint=self.adjoint,
                 throw=False,
             )
@@ -146,6 +150,7 @@ class StaticPointsProblem(AbstractProblem):
             omega_s,
             sol.ts if outputs else None,
             sol.outputs if outputs else None,
+            getattr(sol, "diagnostics", None) if outputs else None,
         )
 
     def metrics(self, method, solution):
@@ -201,24 +206,31 @@ def static_points_problem(
     window_s: float = 2.0,
     every_s: float = 1.0,
     adjoint: AbstractAdjoint | None = None,
+    exciting: bool = True,
 ) -> StaticPointsProblem:
     """The `static_points` problem (`StaticPointsProblem`) on the project's scene
     (`papers.nath.scenario`, `duration` at `rate_hz`, the nominal camera of
     `nath.nominal_camera`) or on a `visjax.io.StaticPointsData` file, with `noise_px` of
     pixel noise per seed. The EKF assumes the pixel noise `max(noise_px, 0.05)`; its prior
-    spreads are those of `static_points_ekf` (a nominal camera's uncertainty)."""
+    spreads are those of `static_points_ekf` (a nominal camera's uncertainty).
+    `exciting=False`: the scene's platform only moves along its optical axis (not
+    persistently exciting: the structure is not recoverable)."""
     from ..estimators import Stream, integration_step
     from . import nath
 
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
     if data is None:
-        sc = nath.scenario(duration, rate_hz)
+        sc = nath.scenario(duration, rate_hz, exciting=exciting)
         ts, R_b, x_b, omega_c = sc.ts, sc.R_b, sc.x_b, sc.omega_c
         pixels = jnp.concatenate([sc.p_c, sc.p_s], axis=1)
         n_known, truth, nominal = sc.p_c.shape[1], sc.omega_s, nath.nominal_camera()
-        source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz"
+        source = f"the project's scene, {duration:g} s at {rate_hz:g} Hz" + (
+            "" if exciting else ", not exciting"
+        )
     else:
+        if not exciting:
+            raise ValueError("`exciting` chooses the project's scene; a data file has its own.")
         from ..io import StaticPointsData
 
         d = StaticPointsData.load(data)

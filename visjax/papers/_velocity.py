@@ -71,6 +71,8 @@ class VelocityProblem(AbstractProblem):
     dropouts: bool = eqx.field(static=True)
     chunk: int = eqx.field(static=True)
     source: str = eqx.field(static=True)
+    known_length: tuple | None = eqx.field(static=True, default=None)
+    constants: str = eqx.field(static=True, default="calibration")
     adjoint: AbstractAdjoint = DirectAdjoint()
 
     @property
@@ -148,11 +150,22 @@ class VelocityProblem(AbstractProblem):
     def _dropped(self):
         return "hold" if self.dropouts else "stop"
 
-    def _camera(self, pixels):
-        """The fixed camera's constants; the reference image is the first frame of this
-        draw unless the problem has its own."""
-        from ..estimators import FixedCamera
+    def camera(self, inputs):
+        """The fixed camera's constants every method of this draw (`inputs`) uses: the
+        reference image is the draw's first frame unless the problem has its own; $n^*$
+        and $z_1^*$ those of the calibration (`constants="calibration"`) or measured
+        from the draw's own frames (`constants="per_draw"`, the paper's premise run on
+        noisy images; a failed measurement fails every method of the draw)."""
+        return self._camera(inputs["pixels"])
 
+    def _camera(self, pixels):
+        from ..estimators import FixedCamera, fixed_camera
+
+        if self.constants == "per_draw":
+            return fixed_camera(
+                pixels, self.A, self.R_star, self.s1, reference_pixels=self.reference_pixels,
+                known_length=self.known_length, dropped=self._dropped(), throw=False,
+            )  # fmt: skip
         p_ref = pixels[0] if self.reference_pixels is None else self.reference_pixels
         return FixedCamera(p_ref, self.A, self.R_star, self.s1, self.n_star, self.z1_star)
 
@@ -220,7 +233,12 @@ class VelocityProblem(AbstractProblem):
             "ekf_max_jerk": self.max_jerk,
             "n_star": np.asarray(self.n_star).tolist(),
             "z1_star": float(self.z1_star),
-            "constants_from": "the noise-free pixels (calibration), shared by all methods",
+            "constants_from": (
+                "each draw's own frames (the known length on its first frame)"
+                if self.constants == "per_draw"
+                else "the noise-free pixels (calibration), shared by all methods"
+            ),
+            "known_length": None if self.known_length is None else list(self.known_length),
             "per_run": "pixel noise; homography, decomposition and J recomputed",
             "latency": "batch: one fit over all frames per call; others: per sample",
             "chunk": self.chunk,
@@ -253,6 +271,7 @@ def velocity_problem(
     max_jerk: float | None = None,
     chunk: int = 256,
     adjoint: AbstractAdjoint | None = None,
+    constants: str = "calibration",
 ) -> VelocityProblem:
     """The `velocity` problem (`VelocityProblem`) on the section-6 simulation of
     Chitrakaran et al. (`duration` at `rate_hz`, gains of eq. (63)) or on a
@@ -264,7 +283,13 @@ def velocity_problem(
     is 0.2 sin t; 1.0 for a file). `chunk`: frames per fused chunk of the stream
     (`velocity_stream`); fastest on a 2-core CPU at about 16,000 frames per chunk call, chunk
     x the vmapped batch. `adjoint`: the runner's (default `DirectAdjoint()`;
-    `CheckpointAdjoint()` for reverse-mode tuning of many gains).
+    `CheckpointAdjoint()` for reverse-mode tuning of many gains). `constants`: where
+    $n^*$ and $z_1^*$ come from: `"calibration"` (default), measured once from the
+    noise-free pixels and shared by every draw; `"per_draw"`, measured from each draw's
+    noisy frames (what `visjax velocity` reports). $z_1^*$ comes from a known length
+    (the paper's premise, section 5): in the simulation the distance between features 1
+    and 3 (the square's diagonal), in a file its `length` (if it has none, from the
+    object frame's origin, `depth_from_known_length`).
     """
     from ..estimators import fixed_camera
     from .chitrakaran import K_EQ63, RHO_EQ63, section6_scenario, window
@@ -273,10 +298,15 @@ def velocity_problem(
         raise ValueError(f"`chunk` must be a positive int (frames per chunk); got {chunk!r}.")
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
+    if constants not in ("calibration", "per_draw"):
+        raise ValueError(
+            f'`constants` must be "calibration" or "per_draw"; got {constants!r}.'
+        )
     if data is None:
         sc = section6_scenario(duration, rate_hz)
         ts, clean, A, R_star, s1 = sc.ts, sc.pixels, sc.A, sc.R_star, sc.s[0]
-        truth, known_length, p_ref, K, rho = sc.velocity, None, None, K_EQ63, RHO_EQ63
+        truth, p_ref, K, rho = sc.velocity, None, K_EQ63, RHO_EQ63
+        known_length = (0, 2, float(jnp.linalg.norm(sc.s[0] - sc.s[2])))  # the diagonal
         source = f"section-6 simulation, {duration:g} s at {rate_hz:g} Hz"
     else:
         from ..io import VelocityData
@@ -323,5 +353,12 @@ def velocity_problem(
         dropouts=dropouts,
         chunk=chunk,
         source=source,
+        known_length=None if known_length is None else _length(known_length),
+        constants=constants,
         adjoint=DirectAdjoint() if adjoint is None else adjoint,
     )
+
+
+def _length(known_length) -> tuple[int, int, float]:
+    i, j, length = known_length
+    return (int(i), int(j), float(length))

@@ -178,26 +178,40 @@ def velocity_experiment(
     seed: int = 0,
     progress=None,
 ) -> VelocityRun:
-    """Simulate section 6, measure n* and z1*, run the estimator (eqs. 39-40).
+    """Section 6 as the `velocity` problem states it (`velocity_problem` with
+    `constants="per_draw"`): the simulation with `noise_px` of pixel noise (seed `seed`),
+    $n^*$ and $z_1^*$ measured from the noisy frames ($z_1^*$ from one known length
+    between two features, the paper's premise, section 5: features 1 and 3, the
+    square's diagonal), and the estimator (eqs. 39-40) run once (`studies.solution`).
 
     `progress`, if given, is called with the name of each stage as it starts.
+
+    **Raises:** `RuntimeError` if the run fails (its result code and sample).
     """
+    from .._results import RESULTS, result_names
+    from ..studies import solution
+    from ._velocity import velocity_problem
+
     progress = progress or (lambda stage: None)
     progress("simulate section 6")
-    key = jax.random.key(seed) if noise_px > 0 else None
-    sc = section6_scenario(duration, rate_hz, noise_px=noise_px, key=key)
-    progress("reconstruct every frame")
-    # z1* from one known length between two features, the paper's premise (section 5):
-    # features 1 and 3, the square's diagonal (with noisy frames the plane normal is too
-    # coarse for the object-origin path, `depth_from_known_length`)
-    length = jnp.linalg.norm(sc.s[0] - sc.s[2])
-    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], known_length=(0, 2, length))
-    stream = velocity_stream(sc.ts, sc.pixels, camera)
-    n_star, z1_star = camera.n_star, camera.z1_star
+    problem = velocity_problem(
+        noise_px=noise_px, duration=duration, rate_hz=rate_hz, constants="per_draw"
+    )
     progress("estimate")
-    sol = run(VelocityEstimator(K=K, rho=rho), stream)
+    key = jax.random.key(seed)
+    sol = solution(problem, {"K": K, "rho": rho}, key)
+    if not bool(sol.result == RESULTS.successful):
+        raise RuntimeError(
+            f"the velocity estimator failed: {result_names(sol.result)} at sample "
+            f"{int(sol.failed_sample)}."
+        )
+    camera = problem.camera(problem.inputs(key))
     return VelocityRun(
-        ts=sc.ts, velocity=sc.velocity, estimate=sol.outputs.v_hat, n_star=n_star, z1_star=z1_star
+        ts=problem.ts,
+        velocity=problem.truth,
+        estimate=sol.outputs.v_hat,
+        n_star=camera.n_star,
+        z1_star=camera.z1_star,
     )
 
 
@@ -414,7 +428,7 @@ def velocity_reproduction(
     check_seeds(seeds, noise_px)
     K = list(K_EQ63) if K is None else list(K)
     rho = list(RHO_EQ63) if rho is None else list(rho)
-    bar = stages(3 + seeds, "velocity", quiet)
+    bar = stages(2 + seeds, "velocity", quiet)
     started = []
 
     def progress(stage):

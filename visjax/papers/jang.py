@@ -38,6 +38,7 @@ What the thesis leaves open, chosen here (each a documented assumption):
 - **Durations.** 30 s; steady-state RMS over the last 15 s.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import final
 
@@ -50,7 +51,6 @@ from jaxtyping import Array, Float, PRNGKeyArray
 from .._results import RESULTS, result_names
 from ..estimators import (
     MovingPointObserver,
-    SaveAt,
     Stream,
     moving_point_stream,
     run,
@@ -174,6 +174,17 @@ def _velocities(s: ThesisSet, t):
     return u, v_p
 
 
+class _SetMotion(eqx.Module):
+    """`_velocities(s, t)[which]` as a Module with the set as a static field: the compiled
+    integration of eq. (2.11) is reused by every scenario of the set with the same length."""
+
+    s: ThesisSet = eqx.field(static=True)
+    which: int = eqx.field(static=True)
+
+    def __call__(self, t):
+        return _velocities(self.s, t)[self.which]
+
+
 @final
 class ThesisScenario(eqx.Module):
     """A simulated experiment set: the 1 kHz truth and the 30 Hz camera measurements.
@@ -247,9 +258,7 @@ def scenario(
     u_mean, vp_mean = _velocities(s, jnp.zeros(()))
     drift = (np.asarray(u_mean[:2]) - np.asarray(vp_mean[:2])) * duration / 2
     x0 = jnp.array([drift[0] / depth_cm, drift[1] / depth_cm, 1.0 / depth_cm])
-    x = moving_camera_point(
-        lambda t: _velocities(s, t)[0], lambda t: _velocities(s, t)[1], x0, ts
-    )  # eq. (2.11)
+    x = moving_camera_point(_SetMotion(s, 0), _SetMotion(s, 1), x0, ts)  # eq. (2.11)
     position = jnp.stack([x[:, 0] / x[:, 2], x[:, 1] / x[:, 2], 1.0 / x[:, 2]], axis=1) / 100.0
 
     # camera: sample at camera_hz, hold; the sample index by integer arithmetic
@@ -257,7 +266,7 @@ def scenario(
     Kc_true = jnp.array(KC_REFINED)
     p = x[first, :2] @ Kc_true[:2, :2].T + Kc_true[:2, 2][None, :]
     p = add_pixel_noise(key, p, noise_px)
-    u_frames = jax.vmap(lambda t: _velocities(s, t)[0])(ts[first])
+    u_frames = jax.vmap(_SetMotion(s, 0))(ts[first])
     return ThesisScenario(
         ts=ts,
         x=x,
@@ -308,13 +317,30 @@ def structure_experiment(
     K=None,
     Y=None,
 ) -> StructureRun:
-    """Simulate a thesis set, run the UIO (eq. (3.5)) at 1 kHz on the held 30 Hz frames,
-    and the steady-state RMS position error (metres) over the second half of the run."""
-    key = jax.random.key(seed) if noise_px > 0 else None
-    sc = scenario(set_name, duration, noise_px=noise_px, key=key, Kc_observer=Kc_observer)
-    sol = run(observer(set_name, K, Y), sc.held_stream(), saveat=SaveAt(every=10))
-    estimate = sol.outputs.position / 100.0  # cm -> m
-    truth = sc.position[::10]
+    """A thesis set as the `moving_point` problem states it (`moving_point_problem`):
+    the simulated set with `noise_px` of pixel noise (seed `seed`), the UIO (eq. (3.5))
+    at 1 kHz on the held 30 Hz frames, run once (`studies.solution`, the thesis' gains
+    unless `K`, `Y` are given), and the steady-state RMS position error (metres) over the
+    second half of the run (at the 100 Hz saved samples).
+
+    **Raises:** `RuntimeError` if the run fails (its result code and sample)."""
+    from .._results import RESULTS, result_names
+    from ..studies import solution
+    from ._moving_point import moving_point_problem
+
+    problem = moving_point_problem(
+        variant=set_name, noise_px=noise_px, duration=duration, Kc_observer=Kc_observer
+    )
+    gains = {k: v for k, v in (("K", K), ("Y", Y)) if v is not None}
+    sol = solution(problem, gains, jax.random.key(seed))
+    if not bool(sol.result == RESULTS.successful):
+        raise RuntimeError(
+            f"the unknown input observer failed on set {set_name}: "
+            f"{result_names(sol.result)} at sample {int(sol.failed_sample)}."
+        )
+    every = int(round(0.01 / float(problem.ts[1] - problem.ts[0])))
+    estimate = sol.outputs.position * problem.to_m  # the thesis' cm -> m
+    truth = problem.truth[::every] * problem.to_m
     steady = sol.ts >= duration / 2
     err = np.asarray(estimate - truth)[np.asarray(steady)]
     # the thesis' lengths are in cm: the camera's linear velocity to m/s
@@ -324,8 +350,8 @@ def structure_experiment(
         position=truth,
         estimate=estimate,
         rms=jnp.sqrt(jnp.mean(err**2, axis=0)),
-        frame_ts=sc.frame_ts,
-        camera_velocity=sc.frame_velocities * to_si[None, :],
+        frame_ts=problem.frame_ts,
+        camera_velocity=problem.frame_velocities * to_si[None, :],
     )
 
 
@@ -420,17 +446,41 @@ def _testbed_motion(s: ThesisSet, units: str, ts, vp_amplitude):
     the camera frame v_p(t) (m/s) of a set, under a unit reading."""
     scale = UNITS[units]
     amp = s.vp_amplitude if vp_amplitude is None else tuple(vp_amplitude)
+    return _TestbedTwist(s, scale), _MarkerVelocity(jnp.asarray(amp, float), scale)
 
-    def u(t):
-        u_set, _ = _velocities(s, t)  # A's numbers, in the reading's unit
+
+# Modules rather than closures: the compiled integrations are reused by every testbed run
+# of a set (and, for the marker, of any amplitude).
+
+
+class _TestbedTwist(eqx.Module):
+    s: ThesisSet = eqx.field(static=True)
+    scale: float = eqx.field(static=True)
+
+    def __call__(self, t):
+        u_set, _ = _velocities(self.s, t)  # A's numbers, in the reading's unit
+        scale = self.scale
         return u_set * jnp.array([scale, scale, scale, 1.0, 1.0, 1.0])
 
-    def v_p(t):
-        return scale * jnp.stack(
+
+class _InPlane(eqx.Module):
+    """(v_px, -v_py): the marker's velocity in the planar frame of `planar_path`."""
+
+    v_p: Callable
+
+    def __call__(self, t):
+        return self.v_p(t)[:2] * jnp.array([1.0, -1.0])
+
+
+class _MarkerVelocity(eqx.Module):
+    amp: Array
+    scale: float = eqx.field(static=True)
+
+    def __call__(self, t):
+        amp = self.amp
+        return self.scale * jnp.stack(
             [amp[0] * jnp.sin(0.5 * t), amp[1] * jnp.cos(0.3 * t), jnp.zeros_like(t)]
         )
-
-    return u, v_p
 
 
 def testbed(
@@ -541,7 +591,7 @@ def testbed(
         # the plane is planar_path with (v_px, -v_py) at the rate -w_z (as for the camera),
         # whose heading at mid-run is 0 (x along +X): the planar frame is F's X-Y
         wz = float(np.asarray(u_fn(jnp.zeros(())))[5])
-        _, c = planar_path(lambda t: vp_fn(t)[:2] * jnp.array([1.0, -1.0]), -wz, ts, t_mid)
+        _, c = planar_path(_InPlane(vp_fn), -wz, ts, t_mid)
         c = np.concatenate([np.asarray(c), np.zeros((n, 1))], axis=1)
     else:
         c = np.zeros((n, 3))

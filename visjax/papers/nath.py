@@ -26,11 +26,9 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from ..estimators import (
-    SaveAt,
     StaticPointsEstimator,
     Stream,
     pe_measure,
-    run,
     static_points_stream,
 )
 from ..geometry import camera_parameters, intrinsics_eq4, so3_exp
@@ -198,18 +196,32 @@ def euclidean_experiment(
     *,
     seed: int = 0,
     exciting: bool = True,
-    gains=None,
     pe_window: float = 2.0,
 ) -> EuclideanRun:
-    """Simulate the project's scenario and run the estimator at 1 kHz (saved every 10 ms)."""
-    key = jax.random.key(seed) if noise_px > 0 else None
-    sc = scenario(duration, noise_px=noise_px, key=key, exciting=exciting)
-    sol = run(initial_estimator(sc, gains), stream(sc), saveat=SaveAt(every=10, diagnostics=True))
+    """The project's scenario as the `static_points` problem states it
+    (`static_points_problem` at 1 kHz): `noise_px` of pixel noise (seed `seed`), the
+    estimator from the nominal camera (`initial_estimator`'s derived gains) run once
+    (`studies.solution`), saved every 10 ms with its diagnostics.
+
+    **Raises:** `RuntimeError` if the run fails (its result code and sample)."""
+    from .._results import RESULTS, result_names
+    from ..studies import solution
+    from ._static_points import static_points_problem
+
+    problem = static_points_problem(
+        noise_px=noise_px, duration=duration, rate_hz=1000.0, exciting=exciting
+    )
+    sol = solution(problem, {}, jax.random.key(seed))
+    if not bool(sol.result == RESULTS.successful):
+        raise RuntimeError(
+            f"the adaptive structure estimator failed: {result_names(sol.result)} at sample "
+            f"{int(sol.failed_sample)}."
+        )
     d = sol.diagnostics
     return EuclideanRun(
         ts=sol.ts,
         omega_s=sol.outputs.omega_s,
-        omega_true=sc.omega_s,
+        omega_true=problem.truth,
         p_tilde_c=d.p_tilde_c,
         p_tilde_s=d.p_tilde_s,
         pe=pe_measure(d.info_rate_s, sol.ts, pe_window),

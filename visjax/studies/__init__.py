@@ -17,6 +17,7 @@ from ._problem import (
     evaluate as evaluate,
     fingerprint as fingerprint,
     held as held,
+    solution as solution,
 )
 from ._registry import (
     problem as problem,

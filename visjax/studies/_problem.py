@@ -329,6 +329,42 @@ def evaluate(
     return Evaluation(values, result, failed)
 
 
+def solution(
+    problem: AbstractProblem,
+    params: Mapping[str, Any] | None = None,
+    key: Any = 0,
+    *,
+    method: str | None = None,
+):
+    """One run of one method of `problem` with its time series: the solution of
+    `problem.solve(method, params, problem.inputs(key), outputs=True)`, compiled once per
+    problem and method (`equinox.filter_jit`). What `visjax run PROBLEM`, the figures and
+    the papers' reproductions are made of; `evaluate` is its batched, metrics-only
+    counterpart.
+
+    **Arguments:** `problem`; `params` (name -> value; the others at their defaults);
+    `key` (an int seed or a typed PRNG key; default the seed 0: every method of one seed
+    sees the same draw); `method` (default: the estimator).
+
+    **Returns:** the method's solution (its `result` says whether it succeeded; it never
+    raises for a value).
+    """
+    method = problem.check_method(method)
+    if not jnp.issubdtype(jnp.asarray(key).dtype, jax.dtypes.prng_key):
+        if isinstance(key, bool) or not isinstance(key, int | np.integer) or key < 0:
+            raise ValueError(f"`key` must be a non-negative int seed or a PRNG key; got {key!r}.")
+        key = jax.random.key(int(key))
+    params = problem.resolve(params)
+    return _solve_outputs(_Run(problem, method, {}), params, key)
+
+
+@eqx.filter_jit
+def _solve_outputs(run, params, key):
+    # the problem is a compile-time constant, hashed by its fingerprint (its methods may
+    # read its arrays as numbers)
+    return run.problem.solve(run.method, params, run.problem.inputs(key), outputs=True)
+
+
 def method_runs(problem: AbstractProblem, params=None) -> dict:
     """name -> `inputs -> solution` of every method (for the functional `compare`)."""
     resolved = problem.resolve(params)
