@@ -5,6 +5,7 @@ final state's output)."""
 
 import jax
 import numpy as np
+import pytest
 
 from tests.helpers import euclidean_scene_file
 from visjax import papers, studies
@@ -31,3 +32,5 @@ def test_static_points_file_run_equals_its_problem(tmp_path):
         run.body["final_position_error_m"], ev.metrics["error"][0], rtol=1e-10
     )
     assert max(run.body["final_position_error_m"]) < 0.5  # 2 s in: converging, not diverged
+    with pytest.raises(ValueError, match="`exciting` chooses the project's scene"):
+        papers.static_points_problem(data=path, exciting=False)

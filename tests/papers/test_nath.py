@@ -23,6 +23,7 @@ def runs():
     return {exc: euclidean_experiment(20.0, exciting=exc) for exc in (True, False)}
 
 
+@pytest.mark.slow  # the simulation's 20 s at 1 kHz, twice: product scale
 def test_structure_converges_noise_free(runs):
     """Initial errors 2-9 cm (each feature on its nominal ray at the known features' median
     depth); after 20 s every feature within 1.5 mm (measured 0.2-0.9)."""
@@ -38,6 +39,7 @@ def test_structure_converges_noise_free(runs):
     assert pc[-200:].max() < 0.1 * pc[0].max()
 
 
+@pytest.mark.slow  # the simulation's 20 s at 1 kHz, twice: product scale
 def test_resetting_and_projection(runs):
     r = runs[True]
     est = initial_estimator(uncalibrated_scenario(0.01))  # the gains depend on sample 0 only
@@ -50,6 +52,7 @@ def test_resetting_and_projection(runs):
         assert np.asarray(run_.depth_c).min() > float(est.eps_c)
 
 
+@pytest.mark.slow  # the simulation's 20 s at 1 kHz, twice: product scale
 def test_pe_measure_detects_a_non_exciting_trajectory(runs):
     """Pure translation along the optical axis: eq. (49) fails, the structure stalls."""
     exciting = np.nanmedian(np.asarray(runs[True].pe), axis=0)
@@ -94,6 +97,7 @@ def test_bad_settings():
         platform_measurements(sc.R_b, sc.x_b, sc.p_s, sc.p_c, sc.omega_c[:2])
 
 
+@pytest.mark.slow  # the simulation's 20 s at 1 kHz, twice: product scale
 def test_100hz_logs_with_the_hold_reach_the_1khz_accuracy(runs):
     """The scenario sampled at 100 Hz: gains derived for 0.1 ms steps are refused with one
     Euler step per sample (version 1 ended metres off and called it successful); gains for

@@ -215,14 +215,8 @@ class ThesisScenario(eqx.Module):
     def held_stream(self) -> Stream:
         """The same frames held at the 1 kHz samples (as a logger at 1 kHz records them),
         with the true state as `truth`."""
-        k = self.frame_index
-        return moving_point_stream(
-            self.ts,
-            self.frame_pixels[k],
-            self.frame_velocities[k],
-            self.Kc_observer,
-            truth=self.x,
-        )
+        pixels, velocities = _held(self.frame_pixels, self.frame_velocities, self.frame_index)
+        return moving_point_stream(self.ts, pixels, velocities, self.Kc_observer, truth=self.x)
 
 
 def scenario(
@@ -259,25 +253,36 @@ def scenario(
     drift = (np.asarray(u_mean[:2]) - np.asarray(vp_mean[:2])) * duration / 2
     x0 = jnp.array([drift[0] / depth_cm, drift[1] / depth_cm, 1.0 / depth_cm])
     x = moving_camera_point(_SetMotion(s, 0), _SetMotion(s, 1), x0, ts)  # eq. (2.11)
-    position = jnp.stack([x[:, 0] / x[:, 2], x[:, 1] / x[:, 2], 1.0 / x[:, 2]], axis=1) / 100.0
-
     # camera: sample at camera_hz, hold; the sample index by integer arithmetic
     held, first = hold_indices(n, rate_hz, camera_hz)
     Kc_true = jnp.array(KC_REFINED)
-    p = x[first, :2] @ Kc_true[:2, :2].T + Kc_true[:2, 2][None, :]
+    position, frame_ts, p, u_frames = _measurements(_SetMotion(s, 0), ts, x, first, Kc_true)
     p = add_pixel_noise(key, p, noise_px)
-    u_frames = jax.vmap(_SetMotion(s, 0))(ts[first])
     return ThesisScenario(
         ts=ts,
         x=x,
         position=position,
-        frame_ts=ts[first],
+        frame_ts=frame_ts,
         frame_pixels=p,
         frame_velocities=u_frames,
         frame_index=jnp.asarray(held),
         Kc_true=Kc_true,
         Kc_observer=jnp.asarray(Kc_observer, float),
     )
+
+
+@eqx.filter_jit
+def _measurements(camera_twist, ts, x, first, Kc_true):
+    """The true position (m), the frame times, the frames' pixels and the camera velocities
+    at the frames (one compiled program, not one per operation)."""
+    position = jnp.stack([x[:, 0] / x[:, 2], x[:, 1] / x[:, 2], 1.0 / x[:, 2]], axis=1) / 100.0
+    p = x[first, :2] @ Kc_true[:2, :2].T + Kc_true[:2, 2][None, :]
+    return position, ts[first], p, jax.vmap(camera_twist)(ts[first])
+
+
+@jax.jit
+def _held(pixels, velocities, k):
+    return pixels[k], velocities[k]
 
 
 def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> MovingPointObserver:
