@@ -78,7 +78,7 @@ def test_bad_known_length(no_jaxtyping):
 def test_the_stream_uses_the_known_length():
     """On the section-6 scenario, a length between two features (not through the object
     origin) gives the true z1* and the same stream as the true constants."""
-    sc = chitrakaran.section6_scenario(0.05, 1000.0)
+    sc = chitrakaran.section6_scenario(0.3, 1000.0)
     s = np.asarray(sc.s)
     L = float(np.linalg.norm(s[1] - s[2]))
     camera = fixed_camera(

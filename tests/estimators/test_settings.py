@@ -28,19 +28,19 @@ NAN, INF = float("nan"), float("inf")
 
 
 def _velocity():
-    sc = chitrakaran.section6_scenario(0.02, 1000.0)
+    sc = chitrakaran.section6_scenario(0.3, 1000.0)
     camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0], n_star=sc.n_star, z1_star=sc.z1_star)
     stream = velocity_stream(sc.ts, sc.pixels, camera)
     return VelocityEstimator(K=chitrakaran.K_EQ63, rho=chitrakaran.RHO_EQ63), stream
 
 
 def _uio():
-    sc = jang.scenario("II.1", 0.1)
+    sc = jang.scenario("II.1", 1.0)
     return jang.observer("II.1"), sc.camera_stream()
 
 
 def _adaptive():
-    sc = nath.scenario(0.02)
+    sc = nath.scenario(0.05)
     return nath.initial_estimator(sc), nath.stream(sc)
 
 

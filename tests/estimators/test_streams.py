@@ -29,7 +29,7 @@ def _assert_stops_at(estimator, stream, k, dt=None):
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_velocity_stream(bad):
-    sc = chitrakaran.section6_scenario(0.1, 1000.0)
+    sc = chitrakaran.section6_scenario(0.3, 1000.0)
     pixels = np.asarray(sc.pixels).copy()
     pixels[37, 2, 1] = bad
     camera = fixed_camera(

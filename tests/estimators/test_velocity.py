@@ -49,7 +49,7 @@ def _stream(sc):
 
 def test_e_dot_equals_J_v():
     """eq. (32): the time derivative of the reconstruction-based e is J v (jvp vs J v)."""
-    sc = section6_scenario(0.01, 1000.0)  # only the constants are used
+    sc = section6_scenario(0.3, 1000.0)  # only the constants are used
     A, R_star, s, x_f_star = sc.A, sc.R_star, sc.s, sc.x_f_star
     p_ref = project(x_f_star[None, :] + s @ R_star.T, A)
     camera = FixedCamera(p_ref, A, R_star, s[0], sc.n_star, sc.z1_star)

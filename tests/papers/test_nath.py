@@ -42,7 +42,7 @@ def test_structure_converges_noise_free(runs):
 @pytest.mark.slow  # the simulation's 20 s at 1 kHz, twice: product scale
 def test_resetting_and_projection(runs):
     r = runs[True]
-    est = initial_estimator(uncalibrated_scenario(0.01))  # the gains depend on sample 0 only
+    est = initial_estimator(uncalibrated_scenario(0.05))  # the gains depend on sample 0 only
     assert float(r.resets[-1]) >= 5  # eq. (39): the covariance is reset, about once a second
     lam = np.asarray(r.lambda_min_gamma_c)
     assert np.all(lam >= float(est.eta1) * (1 - 1e-9))
@@ -82,7 +82,7 @@ def test_vmap_over_noise_seeds_and_grad():
 
 
 def test_bad_settings():
-    sc = uncalibrated_scenario(0.01)
+    sc = uncalibrated_scenario(0.05)
     with pytest.raises(ValueError, match="eta0 > eta1"):
         run(initial_estimator(sc, {"eta0": 1e-8, "eta1": 1e-7}), stream(sc))
     for gain in ("alpha_c", "alpha", "gamma_s0"):

@@ -37,7 +37,7 @@ def test_reproduce_rows_hold_numbers_and_kinds():
     assert [r[4] for r in rows] == ["bound", "truth", "OpenCV"]
     assert rows[0][1] == 0.04 and rows[2][1:4:2] == (1e-13, 1e-4)
     # the truth of z1* is feature 1's depth in the reference pose, as the scenario has it
-    sc = chitrakaran.section6_scenario(0.01, 1000.0)
+    sc = chitrakaran.section6_scenario(0.3, 1000.0)
     assert rows[1][3] == pytest.approx(float(sc.z1_star), abs=1e-12)
 
     structure = {"sets": {n: {"rms": [0.01, 0.02, 0.03], "thesis_rms": list(s.thesis_rms)}
