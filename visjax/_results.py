@@ -103,12 +103,14 @@ def first_failure(result, failed, code, index):
 def all_finite(tree):
     """Whether every floating entry of a pytree is finite. An explicit `isfinite` test, so
     that no reduction can drop a NaN (XLA's CPU `max` can, in large `vmap` batches)."""
-    leaves = [
-        sall(jnp.isfinite(x))
-        for x in jax.tree_util.tree_leaves(tree)
-        if jnp.issubdtype(jnp.result_type(x), jnp.inexact)
-    ]
-    return sall(jnp.stack(leaves)) if leaves else jnp.array(True)
+    leaves = jax.tree_util.tree_leaves(tree)
+    leaves = [x for x in leaves if jnp.issubdtype(jnp.result_type(x), jnp.inexact)]
+    return _all_finite(leaves) if leaves else jnp.array(True)
+
+
+@jax.jit  # one program per set of shapes outside `jit`, not one operation per leaf
+def _all_finite(leaves):
+    return sall(jnp.stack([sall(jnp.isfinite(x)) for x in leaves]))
 
 
 def intrinsics_ok(A):

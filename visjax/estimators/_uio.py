@@ -13,6 +13,7 @@ and a matrix $A(u)$ that follows the measured camera velocity sample by sample, 
 $K(u)$ scheduled on it (both affine in $u$; `visjax.design.design_uio` designs them).
 """
 
+import functools
 from typing import final
 
 import equinox as eqx
@@ -420,6 +421,14 @@ def moving_point_stream(
     check_shape(K_c, (3, 3), "K_c")
     if dropped not in ("stop", "hold", "extrapolate"):
         raise ValueError(f'`dropped` must be "stop", "hold" or "extrapolate"; got {dropped!r}.')
+    y = _normalized_held(ts, pixels, K_c, dropped)
+    stream = Stream(ts=ts, ys=MovingCameraMeasurement(y=y, u=velocities), truth=truth)
+    return checked_samples(stream, "moving_point_stream", throw)
+
+
+@functools.partial(jax.jit, static_argnums=3)  # one program per length outside `jit`
+def _normalized_held(ts, pixels, K_c, dropped):
+    n = ts.shape[0]
     if dropped != "stop":
         seen = jnp.all(jnp.isfinite(pixels), axis=1)
         index = jnp.where(seen, jnp.arange(n), -1)
@@ -435,6 +444,4 @@ def moving_point_stream(
             slope = jnp.where(has_prev[:, None], (held - pixels[prev]) / span[:, None], 0.0)
             ahead = (ts - ts[last])[:, None]
             pixels = jnp.where(seen[:, None], pixels, held + ahead * slope)
-    y = pixel_to_normalized(pixels, K_c)
-    stream = Stream(ts=ts, ys=MovingCameraMeasurement(y=y, u=velocities), truth=truth)
-    return checked_samples(stream, "moving_point_stream", throw)
+    return pixel_to_normalized(pixels, K_c)

@@ -8,6 +8,7 @@ expressed in the camera frame (eq. (10)); $z$ is the depth along the optical axi
 Arrays of points have the point index first: shape (n, 2) or (n, 3).
 """
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -65,7 +66,11 @@ def to_homogeneous(x: Float[ArrayLike, "... 2"]) -> Float[Array, "... 3"]:
     No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
     computed from it; none is turned finite).
     """
-    x = _check_last(x, 2, "x")
+    return _to_homogeneous(_check_last(x, 2, "x"))
+
+
+@jax.jit
+def _to_homogeneous(x):
     return jnp.concatenate([x, jnp.ones(x.shape[:-1] + (1,), x.dtype)], axis=-1)
 
 
@@ -84,8 +89,13 @@ def pixel_to_normalized(
 
     **Returns:** $[x, y]$ of $m = [x, y, 1]^T$, shape (..., 2).
     """
-    p = _check_last(p, 2, "p")
-    A = _check_A(A)
+    return _pixel_to_normalized(_check_last(p, 2, "p"), _check_A(A))
+
+
+# The arithmetic of the functions above and below, compiled: one program per shape when
+# called outside `jit` (not one compiled operation per line); inlined under `jit`.
+@jax.jit
+def _pixel_to_normalized(p, A):
     ok = intrinsics_ok(A)
     A = jnp.where(ok, A, jnp.eye(3, dtype=A.dtype))  # no inf, no NaN gradient
     fx, s, cx = A[0, 0], A[0, 1], A[0, 2]
@@ -110,8 +120,11 @@ def normalized_to_pixel(
     No error path: NaN in, NaN out (a NaN or inf entry reaches every output entry
     computed from it; none is turned finite).
     """
-    m = _check_last(m, 2, "m")
-    A = _check_A(A)
+    return _normalized_to_pixel(_check_last(m, 2, "m"), _check_A(A))
+
+
+@jax.jit
+def _normalized_to_pixel(m, A):
     u = A[0, 0] * m[..., 0] + A[0, 1] * m[..., 1] + A[0, 2]
     v = A[1, 1] * m[..., 1] + A[1, 2]
     return jnp.stack([u, v], axis=-1)
@@ -140,8 +153,11 @@ def _project_checked(
 ) -> tuple[Float[Array, "... 2"], RESULTS]:
     """`project` that never raises: returns `(pixels, result)`; the pixels of a point behind
     the camera are NaN (never a finite placeholder)."""
-    points = _check_last(points, 3, "points")
-    A = _check_A(A)
+    return _project_arrays(_check_last(points, 3, "points"), _check_A(A))
+
+
+@jax.jit
+def _project_arrays(points, A):
     z = points[..., 2]
     bad_depth = jnp.any(z <= 0.0)
     nonfinite = ~jnp.all(jnp.isfinite(points))
@@ -154,7 +170,7 @@ def _project_checked(
     # Keep the division finite for the points in front (and their gradients NaN-free).
     z_safe = jnp.where(z > 0.0, z, 1.0)
     m = points[..., :2] / z_safe[..., None]
-    pixels = normalized_to_pixel(m, A)
+    pixels = _normalized_to_pixel(m, A)
     pixels = jnp.where((z > 0.0)[..., None], pixels, jnp.nan)
     pixels = jnp.where(intrinsics_ok(A), pixels, jnp.nan)
     return pixels, result

@@ -38,6 +38,13 @@ def skew(v: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     v = as_float(v)
     check_shape(v, (3,), "v")
+    return _skew(v)
+
+
+# The arithmetic of the public functions, compiled after their checks: one program per
+# shape when called outside `jit` (not one compiled operation per line); inlined under `jit`.
+@jax.jit
+def _skew(v):
     z = jnp.zeros((), v.dtype)
     return jnp.stack(
         [
@@ -106,6 +113,11 @@ def so3_exp(omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     omega = as_float(omega)
     check_shape(omega, (3,), "omega")
+    return _so3_exp(omega)
+
+
+@jax.jit
+def _so3_exp(omega):
     a, b, _ = _rotation_coefficients(ssum(omega**2))
     W = skew(omega)
     return jnp.eye(3, dtype=omega.dtype) + a * W + b * mm(W, W)
@@ -135,6 +147,11 @@ def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     """
     R = as_float(R)
     check_shape(R, (3, 3), "R")
+    return _so3_log(R)
+
+
+@eqx.filter_jit  # its error_if, raised as equinox's runtime error
+def _so3_log(R):
     dtype = R.dtype
     w = vee(R)  # = sin(theta) u
     c = jnp.clip(0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0), -1.0, 1.0)  # = cos(theta)
@@ -222,6 +239,11 @@ def L_omega(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
+    return _L_omega(e_omega)
+
+
+@jax.jit
+def _L_omega(e_omega):
     return from_rows(_L_omega_rows(rows(e_omega)), e_omega.dtype)
 
 
@@ -254,4 +276,9 @@ def L_omega_inv(e_omega: Float[ArrayLike, "3"]) -> Float[Array, "3 3"]:
     """
     e_omega = as_float(e_omega)
     check_shape(e_omega, (3,), "e_omega")
+    return _L_omega_inv(e_omega)
+
+
+@jax.jit
+def _L_omega_inv(e_omega):
     return from_rows(_L_omega_inv_rows(rows(e_omega)), e_omega.dtype)

@@ -60,7 +60,12 @@ def integrate_pose(
     check_shape(ts, (None,), "ts")
 
     floor = 100.0 * float(jnp.finfo(jnp.result_type(x0, R0, ts)).eps)
-    rtol, atol = max(rtol, floor), max(atol, floor)
+    return _integrate_pose(velocity, x0, R0, ts, max(rtol, floor), max(atol, floor))
+
+
+# the solve and its re-projection, one program per velocity field (a Module: per shape)
+@eqx.filter_jit
+def _integrate_pose(velocity, x0, R0, ts, rtol, atol):
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_PoseField(velocity)),
         diffrax.Dopri8(),

@@ -15,6 +15,7 @@ point first, then the angular velocity, in m/s and rad/s. Lengths are in metres 
 thesis' Table 4-1 is in centimetres: `puma560` converts).
 """
 
+import functools
 import math
 from typing import final
 
@@ -133,6 +134,13 @@ class SerialChain(eqx.Module):
     def n_joints(self) -> int:
         return int(jnp.shape(self.a)[0])
 
+    def _six_joints(self):
+        if self.n_joints != 6:
+            raise ValueError(
+                f"inverse velocity kinematics (4.6) needs a square Jacobian (6 joints); this "
+                f"chain has {self.n_joints}."
+            )
+
     def _q(self, q, name="q"):
         q = as_float(q)
         check_shape(q, (self.n_joints,), name)
@@ -140,15 +148,7 @@ class SerialChain(eqx.Module):
 
     def frames(self, q: Float[ArrayLike, " n"]) -> Float[Array, "n 4 4"]:
         """$T_F^1, T_F^2, \\ldots, T_F^n$: every joint frame in $F$ (products of eq. (4.2))."""
-        q = self._q(q)
-        links = jax.vmap(link_transform)(self.a, self.alpha, self.S, q)
-
-        def step(T, link):
-            T = T @ link
-            return T, T
-
-        _, Ts = jax.lax.scan(step, jnp.eye(4, dtype=links.dtype), links)
-        return Ts
+        return _frames(self, self._q(q))
 
     def forward(self, q: Float[ArrayLike, " n"]) -> Float[Array, "4 4"]:
         """$T_F^n$ (eq. (4.1) for the PUMA's $n = 6$): the last joint frame in $F$."""
@@ -180,7 +180,9 @@ class SerialChain(eqx.Module):
         ($R_F^{nT} V$, $R_F^{nT}\\omega$): for a camera on the tool, the camera velocities
         $u = [v_c, \\omega]$ of the thesis' eq. (2.11).
         """
-        qdot = self._q(qdot, "qdot")
+        return _tool_twist(self, self._q(q), self._q(qdot, "qdot"), local)
+
+    def _tool_twist(self, q, qdot, local):
         Ts = self.frames(q)
         R = Ts[-1, :3, :3]
         twist = _jacobian(Ts) @ qdot
@@ -217,13 +219,13 @@ class SerialChain(eqx.Module):
         **Returns:** an `InverseVelocity` (its `qdot` is only meaningful when `result` is
         `successful`).
         """
-        if self.n_joints != 6:
-            raise ValueError(
-                f"inverse velocity kinematics (4.6) needs a square Jacobian (6 joints); this "
-                f"chain has {self.n_joints}."
-            )
+        self._six_joints()
         twist = as_float(twist)
         check_shape(twist, (6,), "twist")
+        out = _inverse_velocity(self, self._q(q), twist, local, min_singular_value)
+        return raise_or_keep(out.result, out, throw)
+
+    def _inverse_velocity(self, q, twist, local, min_singular_value):
         Ts = self.frames(q)
         R = Ts[-1, :3, :3]
         V_tool, w = twist[:3], twist[3:]
@@ -242,8 +244,7 @@ class SerialChain(eqx.Module):
         result = RESULTS.where(
             (result == RESULTS.successful) & ~all_finite(qdot), RESULTS.nonfinite_output, result
         )
-        out = InverseVelocity(qdot=qdot, sigma_min=sigma_min, result=result)
-        return raise_or_keep(result, out, throw)
+        return InverseVelocity(qdot=qdot, sigma_min=sigma_min, result=result)
 
     def solve_pose(
         self,
@@ -271,14 +272,18 @@ class SerialChain(eqx.Module):
         check_shape(R_target, (3, 3), "R_target")
         check_shape(p_target, (3,), "p_target")
         q = self._q(q_guess, "q_guess")
+        self._six_joints()
+        out = _solve_pose(self, R_target, p_target, q, steps, tol)
+        return raise_or_keep(out.result, out, throw)
 
+    def _solve_pose(self, R_target, p_target, q, steps, tol):
         def error(q):
             R, p = self.tool_pose(q)
             return jnp.concatenate([p_target - p, so3_log(R_target @ R.T)])
 
         def step(carry, _):
             q, result = carry
-            out = self.inverse_velocity(q, error(q), throw=False)
+            out = self._inverse_velocity(q, error(q), False, 1e-3)
             ok = out.result == RESULTS.successful
             q = jnp.where(ok & (result == RESULTS.successful), q + out.qdot, q)
             result = RESULTS.where(result == RESULTS.successful, out.result, result)
@@ -290,7 +295,36 @@ class SerialChain(eqx.Module):
         result = RESULTS.where(
             (result == RESULTS.successful) & ~(residual <= tol), RESULTS.max_steps_reached, result
         )
-        return raise_or_keep(result, PoseSolution(q=q, residual=residual, result=result), throw)
+        return PoseSolution(q=q, residual=residual, result=result)
+
+
+# The methods' arithmetic, compiled: one program per chain size when called outside `jit`
+# (not one compiled operation per line); inlined under `jit`.
+@jax.jit
+def _frames(chain, q):
+    links = jax.vmap(link_transform)(chain.a, chain.alpha, chain.S, q)
+
+    def step(T, link):
+        T = T @ link
+        return T, T
+
+    _, Ts = jax.lax.scan(step, jnp.eye(4, dtype=links.dtype), links)
+    return Ts
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _tool_twist(chain, q, qdot, local):
+    return chain._tool_twist(q, qdot, local)
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _inverse_velocity(chain, q, twist, local, min_singular_value):
+    return chain._inverse_velocity(q, twist, local, min_singular_value)
+
+
+@functools.partial(jax.jit, static_argnums=4)
+def _solve_pose(chain, R_target, p_target, q, steps, tol):
+    return chain._solve_pose(R_target, p_target, q, steps, tol)
 
 
 _CM = 0.01

@@ -17,6 +17,7 @@ up to 0.1 m and 0.1 rad at 0.2-0.5 Hz. `exciting=False` gives pure translation a
 optical axis (a trajectory that does not excite the regressors).
 """
 
+import functools
 from typing import final
 
 import equinox as eqx
@@ -75,6 +76,17 @@ def scenario(
     if noise_px > 0 and key is None:
         raise ValueError("`key` is required when `noise_px > 0`.")
     ts = sample_times(duration, rate_hz)
+    R_b, x_b, p_s, p_c, omega_c, omega_s, A, R_c, x_c, t1, t2 = _scenario(ts, exciting)
+    if noise_px > 0:
+        k1, k2 = jax.random.split(key)
+        p_s = add_pixel_noise(k1, p_s, noise_px)
+        p_c = add_pixel_noise(k2, p_c, noise_px)
+    return UncalibratedScenario(ts, R_b, x_b, p_s, p_c, omega_c, omega_s, A, R_c, x_c, t1, t2)
+
+
+# the scene's arrays, compiled once per length (not one compiled operation per line)
+@functools.partial(jax.jit, static_argnums=1)
+def _scenario(ts, exciting):
     A = intrinsics_eq4(0.008, 1e5, 1e5, jnp.deg2rad(88.0), 320.0, 240.0)
     R_c = so3_exp(jnp.deg2rad(5.0) * jnp.array([0.6, -0.8, 0.0]))
     x_c = jnp.array([0.05, -0.03, 0.10])
@@ -111,23 +123,16 @@ def scenario(
             return so3_exp(w), x
         return jnp.eye(3), jnp.array([0.0, 0.0, 0.2 * jnp.sin(0.5 * t)])
 
-    R_b, x_b = jax.jit(jax.vmap(pose))(ts)  # compiled once, not dispatched op by op
+    R_b, x_b = jax.vmap(pose)(ts)
     # the camera on the platform (eq. (5)); the scene's poses only (no twist is needed)
     body = Trajectory(ts=ts, R=R_b, x=x_b, twist=jnp.zeros((ts.shape[0], 6), ts.dtype))
     rig = CameraRig(A=A, R_c=R_c, x_c=x_c, image_size=None)
 
-    @jax.jit
-    def pixels(points):
-        return view(rig, points_in_camera(rig, points, body))
-
-    p_s = pixels(omega_s)
-    p_c = pixels(omega_c)
-    if noise_px > 0:
-        k1, k2 = jax.random.split(key)
-        p_s = add_pixel_noise(k1, p_s, noise_px)
-        p_c = add_pixel_noise(k2, p_c, noise_px)
+    p_s = view(rig, points_in_camera(rig, omega_s, body))
+    p_c = view(rig, points_in_camera(rig, omega_c, body))
     t1, t2 = camera_parameters(A, R_c, x_c)
-    return UncalibratedScenario(ts, R_b, x_b, p_s, p_c, omega_c, omega_s, A, R_c, x_c, t1, t2)
+    return R_b, x_b, p_s, p_c, omega_c, omega_s, A, R_c, x_c, t1, t2
+
 
 
 def nominal_camera() -> tuple[Float[Array, "3 3"], Float[Array, "3 3"], Float[Array, "3"]]:

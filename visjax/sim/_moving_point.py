@@ -11,6 +11,7 @@ velocity $v_p = R^T \\dot p$ (all in the camera basis), and the state $x = [X/Z,
 then obeys eq. (2.11) (`visjax.kinematics.perspective_dynamics`).
 """
 
+import functools
 from typing import final
 
 import equinox as eqx
@@ -95,12 +96,10 @@ def moving_point_scene(
                 f"`image_size` must be (width, height), both positive; got {image_size!r}."
             )
 
-    R_T = jnp.swapaxes(camera.R, -1, -2)
-    position = jnp.einsum("nij,nj->ni", R_T, point_position - camera.x)  # r = R^T (p - x)
-    v_c = jnp.einsum("nij,nj->ni", R_T, camera.twist[:, :3])
-    w_c = jnp.einsum("nij,nj->ni", R_T, camera.twist[:, 3:])
-    v_p = jnp.einsum("nij,nj->ni", R_T, point_velocity)
-
+    size = None if image_size is None else tuple(float(s) for s in image_size)
+    position, pixels, velocity, v_p, x, in_view = _moving_point_arrays(
+        camera.R, camera.x, camera.twist, point_position, point_velocity, K_c, size
+    )
     Z = position[:, 2]
     concrete = _concrete(Z)
     if concrete is not None and np.any(~(concrete > 0)):
@@ -110,6 +109,26 @@ def moving_point_scene(
             f"{k}: depth Z = {concrete[k]:.4g} <= 0 in the camera frame; it has no image "
             "(Jang's thesis, Assumption 2.1: the point stays in front of the camera)."
         )
+    return MovingPointScene(
+        ts=camera.ts,
+        position=position,
+        pixels=pixels,
+        camera_velocity=velocity,
+        point_velocity=v_p,
+        x=x,
+        in_view=in_view,
+    )
+
+
+@functools.partial(jax.jit, static_argnums=6)
+def _moving_point_arrays(R, x_c, twist, point_position, point_velocity, K_c, image_size):
+    # one compiled program per shape (called outside `jit`: not one per operation)
+    R_T = jnp.swapaxes(R, -1, -2)
+    position = jnp.einsum("nij,nj->ni", R_T, point_position - x_c)  # r = R^T (p - x)
+    v_c = jnp.einsum("nij,nj->ni", R_T, twist[:, :3])
+    w_c = jnp.einsum("nij,nj->ni", R_T, twist[:, 3:])
+    v_p = jnp.einsum("nij,nj->ni", R_T, point_velocity)
+    Z = position[:, 2]
     front = Z > 0
     Z_safe = jnp.where(front, Z, 1.0)
     x = jnp.stack([position[:, 0] / Z_safe, position[:, 1] / Z_safe, 1.0 / Z_safe], axis=1)
@@ -117,7 +136,7 @@ def moving_point_scene(
     pixels = x[:, :2] @ K_c[:2, :2].T + K_c[None, :2, 2]
     in_view = front
     if image_size is not None:
-        w, h = (float(s) for s in image_size)
+        w, h = image_size
         inside = (
             (pixels[:, 0] >= 0.0)
             & (pixels[:, 0] <= w)
@@ -126,15 +145,8 @@ def moving_point_scene(
         )
         in_view = in_view & inside
     pixels = jnp.where(in_view[:, None], pixels, jnp.nan)
-    return MovingPointScene(
-        ts=camera.ts,
-        position=position,
-        pixels=pixels,
-        camera_velocity=jnp.concatenate([v_c, w_c], axis=1),
-        point_velocity=v_p,
-        x=x,
-        in_view=in_view,
-    )
+    return position, pixels, jnp.concatenate([v_c, w_c], axis=1), v_p, x, in_view
+
 
 
 def _concrete(x):

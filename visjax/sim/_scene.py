@@ -18,6 +18,7 @@ Conventions (used by all three problems):
 Nothing here knows a paper's numbers.
 """
 
+import functools
 from collections.abc import Sequence
 from typing import final
 
@@ -54,6 +55,13 @@ def constant_twist_trajectory(
     x0, R0 = _pose_args(x0, R0)
     ts = as_float(ts)
     check_shape(ts, (None,), "ts")
+    return _constant_twist(twist, x0, R0, ts)
+
+
+# The arithmetic of the builders in this module, compiled: one program per shape when
+# called outside `jit` (not one compiled operation per line); inlined under `jit`.
+@jax.jit
+def _constant_twist(twist, x0, R0, ts):
     tau = ts - ts[0]
     R = jax.vmap(lambda s: so3_exp(s * twist[3:]) @ R0)(tau)
     x = x0[None, :] + tau[:, None] * twist[None, :3]
@@ -153,6 +161,11 @@ def spline_trajectory(
     known = _concrete(knots)
     if known is not None and not np.all(np.diff(known) > 0):
         raise ValueError("`knot_ts` must be strictly increasing.")
+    return _spline(knots, R_k, x_k, ts)
+
+
+@jax.jit
+def _spline(knots, R_k, x_k, ts):
     R0 = R_k[0]
     phi = jax.vmap(lambda R: so3_log(R0.T @ R))(R_k)
     values = jnp.concatenate([x_k, phi], axis=1)
@@ -245,12 +258,17 @@ def points_in_camera(
         else:
             points = points[None]
     check_shape(points, (None, None, 3), "points")
+    if body is not None and points.shape[0] != body.ts.shape[0]:
+        raise ValueError(
+            f"`points` must have the body's {body.ts.shape[0]} samples first; got "
+            f"{points.shape}."
+        )
+    return _points_in_camera(rig, points, body)
+
+
+@jax.jit
+def _points_in_camera(rig, points, body):
     if body is not None:
-        if points.shape[0] != body.ts.shape[0]:
-            raise ValueError(
-                f"`points` must have the body's {body.ts.shape[0]} samples first; got "
-                f"{points.shape}."
-            )
         local = jnp.einsum("kji,knj->kni", body.R, points - body.x[:, None, :])  # R_b^T (w-x_b)
     else:
         local = points
@@ -262,13 +280,22 @@ def object_points(body: Trajectory, points: Float[ArrayLike, "n 3"]) -> Float[Ar
     sample: $x + R s_i$ (Chitrakaran et al., eq. (5))."""
     points = as_float(points)
     check_shape(points, (None, 3), "points")
+    return _object_points(body, points)
+
+
+@jax.jit
+def _object_points(body, points):
     return body.x[:, None, :] + jnp.einsum("nij,kj->nki", body.R, points)
 
 
 def view(rig: CameraRig, points_camera: Float[ArrayLike, "... 3"]) -> Float[Array, "... 2"]:
     """Pixels $p = A m / z$ of points in the camera frame, NaN where a point is behind the
     camera ($z \\le 0$) or outside the image (`rig.image_size`): dropped, not reported."""
-    P = as_float(points_camera)
+    return _view(rig, as_float(points_camera))
+
+
+@jax.jit
+def _view(rig, P):
     z = P[..., 2]
     ahead = z > 0.0
     z_safe = jnp.where(ahead, z, 1.0)
@@ -383,18 +410,24 @@ class Sampler(eqx.Module):
     ) -> tuple[Float[Array, "N n 2"], Bool[Array, "N n"]]:
         """Pixels of points given in the camera frame at the frame times, with noise and
         dropouts; `(pixels, seen)`, a missed feature NaN and `seen` False."""
-        clean = view(rig, points_camera)
         needs_key = self.noise_px > 0 or self.dropout > 0
         if needs_key and key is None:
             raise ValueError("a PRNG `key` is required for pixel noise or dropouts.")
-        p = clean
-        if needs_key:
-            k_noise, k_drop = jax.random.split(key)
-            if self.noise_px > 0:
-                p = p + self.noise_px * jax.random.normal(k_noise, p.shape, p.dtype)
-            if self.dropout > 0:
-                kept = jax.random.uniform(k_drop, p.shape[:-1]) >= self.dropout
-                kept = kept.at[0].set(True)
-                p = jnp.where(kept[..., None], p, jnp.nan)
-        seen = jnp.all(jnp.isfinite(p), axis=-1)
-        return p, seen
+        return _record(
+            self.noise_px, self.dropout, rig, as_float(points_camera), key if needs_key else None
+        )
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _record(noise_px, dropout, rig, points_camera, key):
+    p = view(rig, points_camera)
+    if key is not None:
+        k_noise, k_drop = jax.random.split(key)
+        if noise_px > 0:
+            p = p + noise_px * jax.random.normal(k_noise, p.shape, p.dtype)
+        if dropout > 0:
+            kept = jax.random.uniform(k_drop, p.shape[:-1]) >= dropout
+            kept = kept.at[0].set(True)
+            p = jnp.where(kept[..., None], p, jnp.nan)
+    seen = jnp.all(jnp.isfinite(p), axis=-1)
+    return p, seen

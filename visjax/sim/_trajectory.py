@@ -40,7 +40,12 @@ def integrate_twist(
     ts = as_float(ts)
     check_shape(ts, (None,), "ts")
     x, R = integrate_pose(twist, x0, R0, ts)
-    return Trajectory(ts=ts, R=R, x=x, twist=jax.vmap(twist)(ts))
+    return Trajectory(ts=ts, R=R, x=x, twist=_sampled(twist, ts))
+
+
+@eqx.filter_jit
+def _sampled(f, ts):
+    return jax.vmap(f)(ts)
 
 
 def sample_times(duration: float | int, rate_hz: float | int) -> Float[Array, " N"]:

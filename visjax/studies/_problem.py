@@ -313,6 +313,13 @@ def evaluate(
             )
         keys = jax.vmap(jax.random.key)(keys)
     params = problem.resolve(params)
+    values, result, failed = _evaluate_keys(_Run(problem, method, {}), params, keys)
+    return Evaluation(values, result, failed)
+
+
+@eqx.filter_jit  # compiled once per problem and method (hashed as `solution`'s)
+def _evaluate_keys(run, params, keys):
+    problem, method = run.problem, run.method
 
     def one(key):
         sol = problem.solve(method, params, problem.inputs(key))
@@ -325,8 +332,7 @@ def evaluate(
         failed = jnp.asarray(getattr(sol, "failed_sample", -1), jnp.int32)
         return values, result, failed
 
-    values, result, failed = jax.vmap(one)(keys)
-    return Evaluation(values, result, failed)
+    return jax.vmap(one)(keys)
 
 
 def solution(
