@@ -27,7 +27,8 @@ TESTBED_S = 4.0
 def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatch, capsys):
     """`visjax reproduce` on the small settings of the commands' tests below (the full
     `--quick` run is a slow test of `tests/test_outputs.py`): every job runs, every output
-    follows its schema, and the table has one number per row."""
+    follows its schema, and the table has one number per row. Its figures as SVG (a quarter
+    of the time of 300-dpi PNGs; the commands' own tests below write PNGs)."""
     import functools
 
     from visjax import report
@@ -49,7 +50,7 @@ def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatc
         functools.partial(report.moving_point_report, sets=["I.1", "II.2"]),
     )  # fmt: skip
     out = tmp_path / "results"
-    assert main(["reproduce", "--quick", "--quiet", "--format", "png", "--out", str(out)]) == 0
+    assert main(["reproduce", "--quick", "--quiet", "--format", "svg", "--out", str(out)]) == 0
     kinds = check_outputs(out)
     assert sorted(kinds.values()) == sorted(
         ["reproduce", "velocity", "geometry", "structure", "euclidean", "testbed"]
@@ -63,6 +64,8 @@ def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatc
     assert set(table["reference_kind"]) <= {"published", "truth", "bound", "OpenCV"}
     assert table.loc[table["what"].str.contains("z1"), "reference_kind"].tolist() == ["truth"]
     assert "summary" in capsys.readouterr().out
+    figures = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.svg"))
+    assert len(figures) == 8 and not list(out.rglob("*.png")), figures
 
 
 def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
