@@ -78,10 +78,10 @@ def test_e_dot_equals_J_v():
         np.testing.assert_allclose(eye, np.eye(6), atol=1e-10)
 
 
-def test_depth_recovery_and_the_singular_eq56(sc1k):
-    sc = sc1k
+def test_depth_recovery_and_the_singular_eq56():
+    sc = section6_scenario(10.0, 100.0)  # the poses of the 10 s run, at 100 Hz
     p_ref = sc.pixels[0]
-    frames = sc.pixels[2000::500]  # away from the reference pose
+    frames = sc.pixels[200::50]  # away from the reference pose (from 2 s on)
     n_star = plane_normal_from_frames(p_ref, frames, sc.A)
     np.testing.assert_allclose(n_star, sc.n_star, atol=1e-10)
     z1 = depth_from_known_length(
@@ -89,7 +89,7 @@ def test_depth_recovery_and_the_singular_eq56(sc1k):
     )
     np.testing.assert_allclose(z1, sc.z1_star, rtol=1e-8)
     # eq. (56) as printed inverts a singular matrix: m1*_bar = x_f* + R* s1 is its null vector
-    for k in (2000, 4000, 7000):
+    for k in (200, 400, 700):  # 2, 4 and 7 s
         rec = euclidean_reconstruction(p_ref, sc.pixels[k], sc.A, n_star=n_star)
         m1s = np.append(pixel_to_normalized(p_ref[0], sc.A), 1.0)
         m1 = np.append(pixel_to_normalized(sc.pixels[k, 0], sc.A), 1.0)
@@ -112,18 +112,17 @@ def test_section6_simulation_converges_and_improves_with_rate(sc1k):
     assert np.all(rms[4000] < 0.7 * rms[1000]), (rms[1000], rms[4000])
 
 
-def test_settles_from_a_wrong_initial_estimate(sc1k):
-    """Started with v_hat(0) = 0.5 on every axis (true: 0), the error decays to the band."""
+def test_settles_from_a_wrong_initial_estimate(short):
+    """Started with v_hat(0) = 0.5 on every axis (true: 0), the error decays to the band
+    within 0.1 s (measured: at most 0.084 from 0.1 s on; the 10 s run stays there)."""
+    sc, stream = short
     est = VelocityEstimator(K=K, rho=RHO)
-    stream = _stream(sc1k)
     y0 = stream.measurement(0)
     state0 = VelocityState(e_hat=y0.e, eta=y0.J @ jnp.full(6, 0.5))  # kappa_hat(0) = J v, (40)
     sol = run(est, stream, saveat=SaveAt(every=10), state0=state0)
-    err = np.abs(np.asarray(sol.outputs.v_hat) - np.asarray(sc1k.velocity[::10]))
+    err = np.abs(np.asarray(sol.outputs.v_hat) - np.asarray(sc.velocity[::10]))
     np.testing.assert_allclose(err[0], 0.5, rtol=1e-9)
-    late = err[sol.ts >= 5.0].max(0)
-    assert np.all(late < 0.1), late
-    assert np.all(err[sol.ts >= 1.0].max(0) < 0.15)
+    assert np.all(err[sol.ts >= 0.1].max(0) < 0.1), err
 
 
 @pytest.mark.slow
