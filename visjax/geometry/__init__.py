@@ -1,4 +1,4 @@
-"""Camera model, SO(3), homography estimation and decomposition: pure JAX functions."""
+"""Camera model, SO(3) and SL(3), homography estimation and decomposition: pure JAX functions."""
 
 from ._calibration import (
     camera_matrix as camera_matrix,
@@ -26,6 +26,11 @@ from ._homography import (
 from ._reconstruction import (
     Reconstruction as Reconstruction,
     euclidean_reconstruction as euclidean_reconstruction,
+)
+from ._sl3 import (
+    sl3_exp as sl3_exp,
+    sl3_normalize as sl3_normalize,
+    sl3_project as sl3_project,
 )
 from ._so3 import (
     L_omega as L_omega,
