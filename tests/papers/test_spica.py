@@ -1,0 +1,170 @@
+"""The active structure-from-motion observer of Spica et al. (`visjax.papers.spica`): its
+models against the kinematics of simulated points, its vector field against a NumPy
+transcription, the true state kept, convergence with the planar and the spherical
+projection, jit/vmap/grad, bad input."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.helpers import central_difference
+from visjax import RESULTS, sim
+from visjax.estimators import SaveAt, run
+from visjax.papers import spica
+
+A = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+# five static points at 0.5-3 m in front of the camera's start (world = start frame)
+POINTS = np.array(
+    [[0.1, -0.05, 0.5], [-0.3, 0.2, 1.2], [0.4, 0.3, 2.0], [-0.6, -0.4, 2.5], [0.2, -0.7, 3.0]]
+)
+# a constant twist (world frame): translating sideways and forwards, turning slowly
+TWIST = np.array([0.3, 0.2, 0.05, 0.02, -0.03, 0.05])
+GAINS = dict(alpha=1000.0, h=20.0, chi0=1.0 / 1.5)  # every point started at 1.5 m
+
+
+@pytest.fixture(scope="module")
+def scene():
+    ts = jnp.arange(1001, dtype=float) / 1000.0  # 1 s at 1 kHz
+    body = sim.constant_twist_trajectory(TWIST, np.zeros(3), np.eye(3), ts)
+    rig = sim.CameraRig(A=A, image_size=None)
+    P = sim.points_in_camera(rig, POINTS, body)  # (N, n, 3), the camera frame
+    R_T = jnp.swapaxes(body.R, 1, 2)
+    twists = jnp.concatenate(
+        [
+            jnp.einsum("kij,kj->ki", R_T, body.twist[:, :3]),
+            jnp.einsum("kij,kj->ki", R_T, body.twist[:, 3:]),
+        ],
+        axis=1,
+    )
+    pixels = sim.view(rig, P)
+    return ts, P, pixels, twists
+
+
+def _truth(P, projection):
+    P = np.asarray(P)
+    if projection == "planar":
+        return P[..., :2] / P[..., 2:], 1.0 / P[..., 2]
+    r = np.linalg.norm(P, axis=-1)
+    return P / r[..., None], 1.0 / r
+
+
+@pytest.mark.parametrize("projection", ["planar", "spherical"])
+def test_models_against_the_kinematics_of_the_scene(scene, projection):
+    """ds/dt = f_m + Omega^T chi and dchi/dt = f_u, against central differences of the
+    simulated points (1 ms apart) at three samples."""
+    ts, P, _, twists = scene
+    s, chi = _truth(P, projection)
+    for k in (100, 500, 900):
+        for i in range(len(POINTS)):
+            f_m, omega = spica.point_model(s[k, i], twists[k], projection)
+            s_dot = (s[k + 1, i] - s[k - 1, i]) / 2e-3
+            chi_dot = (chi[k + 1, i] - chi[k - 1, i]) / 2e-3
+            np.testing.assert_allclose(f_m + omega * chi[k, i], s_dot, atol=1e-6)
+            rate = spica.point_depth_rate(s[k, i], chi[k, i], twists[k], projection)
+            np.testing.assert_allclose(rate, chi_dot, atol=1e-6)
+
+
+def _numpy_field(s, s_hat, chi_hat, u, alpha, h, projection):
+    """An independent transcription of the observer (module docstring), point by point."""
+    v, w = u[:3], u[3:]
+    out_s, out_chi = [], []
+    for si, shi, ci in zip(s, s_hat, chi_hat, strict=True):
+        if projection == "planar":
+            x, y = si
+            L_w = np.array([[x * y, -(1 + x**2), y], [1 + y**2, -x * y, -x]])
+            f_m = L_w @ w
+            om = np.array([x * v[2] - v[0], y * v[2] - v[1]])
+            f_u = v[2] * ci**2 + (y * w[0] - x * w[1]) * ci
+        else:
+            f_m = np.cross(si, w)
+            om = (np.outer(si, si) - np.eye(3)) @ v
+            f_u = (si @ v) * ci**2
+        xi = si - shi
+        out_s.append(f_m + om * ci + h * xi)
+        out_chi.append(f_u + alpha * om @ xi)
+    return np.array(out_s), np.array(out_chi)
+
+
+@pytest.mark.parametrize("projection", ["planar", "spherical"])
+def test_vector_field_against_a_numpy_transcription(scene, projection):
+    ts, P, pixels, twists = scene
+    stream = spica.point_depth_stream(ts, pixels, twists, A, projection=projection)
+    y = stream.measurement(300)
+    rng = np.random.default_rng(3)
+    s_hat = np.asarray(y.s) + 0.01 * rng.normal(size=y.s.shape)
+    chi_hat = 1.0 / rng.uniform(0.5, 3.0, size=len(POINTS))
+    obs = spica.PointDepthObserver(**GAINS, projection=projection)
+    got = obs.vector_field(0.3, spica.PointDepthState(jnp.asarray(s_hat), jnp.asarray(chi_hat)), y)
+    ref = _numpy_field(np.asarray(y.s), s_hat, chi_hat, np.asarray(y.u), 1000.0, 20.0, projection)
+    np.testing.assert_allclose(got.s_hat, ref[0], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(got.chi_hat, ref[1], rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("projection", ["planar", "spherical"])
+def test_true_state_is_kept_and_a_wrong_one_converges(scene, projection):
+    """Started on the truth, the estimate stays on it (Euler at 1 kHz on held samples:
+    within 0.05%; measured 0.01% planar, 0.02% spherical); started with every point at
+    1.5 m (true: 0.5-3 m), the depth error is below 0.1% after 1 s with both projections
+    (measured 0.003% planar, 0.015% spherical; below 5% from 0.34 s on)."""
+    ts, P, pixels, twists = scene
+    s, chi = _truth(P, projection)
+    stream = spica.point_depth_stream(ts, pixels, twists, A, projection=projection)
+    obs = spica.PointDepthObserver(**GAINS, projection=projection)
+    true0 = spica.PointDepthState(jnp.asarray(s[0]), jnp.asarray(chi[0]))
+    kept = run(obs, stream, saveat=SaveAt(every=10), state0=true0)
+    assert kept.result == RESULTS.successful
+    rel = np.abs(np.asarray(kept.outputs.chi_hat) / chi[::10] - 1.0)
+    assert rel.max() < 5e-4, rel.max()
+    sol = run(obs, stream, saveat=SaveAt(every=10))
+    assert sol.result == RESULTS.successful
+    depth = np.asarray(sol.outputs.depth)
+    true_depth = 1.0 / chi[::10]
+    err = np.abs(depth / true_depth - 1.0)
+    assert err[0].max() > 0.4  # the start is wrong by 40% or more somewhere
+    assert err[-1].max() < 1e-3, err[-1]
+    # the estimated points in the camera frame: the same accuracy
+    np.testing.assert_allclose(sol.outputs.point[-1], P[-1], rtol=1e-3, atol=0)
+
+
+def test_jit_vmap_grad(scene):
+    ts, P, pixels, twists = scene
+    stream = spica.point_depth_stream(ts, pixels, twists, A)
+    chi_true = 1.0 / np.asarray(P[-1, :, 2])
+
+    def final_error(alpha):
+        obs = spica.PointDepthObserver(alpha=alpha, h=20.0, chi0=GAINS["chi0"])
+        sol = run(obs, stream, saveat=SaveAt(outputs=False))
+        return jnp.sum((sol.final_state.chi_hat - chi_true) ** 2)
+
+    alphas = jnp.array([300.0, 1000.0])
+    batched = jax.jit(jax.vmap(final_error))(alphas)
+    for a, b in zip(alphas, batched, strict=True):
+        np.testing.assert_allclose(final_error(a), b, rtol=1e-12)
+    assert batched[1] < batched[0]  # a stiffer gain converges further in 1 s
+    g = jax.grad(final_error)(300.0)
+    fd = central_difference(lambda a: final_error(a[0]), np.array([300.0]), 1e-2)
+    np.testing.assert_allclose(g, fd[0], rtol=1e-5)
+
+
+def test_bad_input(scene, no_jaxtyping):
+    ts, P, pixels, twists = scene
+    bad = pixels.at[40, 2, 0].set(jnp.nan)  # a lost track (or a point behind the camera)
+    with pytest.raises(Exception, match="sample 40"):
+        spica.point_depth_stream(ts, bad, twists, A)
+    sol = run(
+        spica.PointDepthObserver(**GAINS),
+        spica.point_depth_stream(ts, bad, twists, A, throw=False),
+        saveat=SaveAt(outputs=False),
+        throw=False,
+    )
+    assert sol.result == RESULTS.nonfinite_measurement and int(sol.failed_sample) == 40
+    with pytest.raises(ValueError, match="chi0"):
+        run(
+            spica.PointDepthObserver(alpha=1.0, h=1.0, chi0=-0.5),
+            spica.point_depth_stream(ts, pixels, twists, A),
+        )
+    with pytest.raises(ValueError, match="projection"):
+        spica.PointDepthObserver(**GAINS, projection="fisheye")
+    with pytest.raises(ValueError, match="twists"):
+        spica.point_depth_stream(ts, pixels, twists[:, :3], A)
