@@ -30,7 +30,7 @@ PACKAGES = (
     "studies",
 )
 # the papers' modules, documented member by member
-PAPERS = ("chitrakaran", "jang", "nath", "spica")
+PAPERS = ("chitrakaran", "jang", "nath", "spica", "hamel")
 
 pytestmark = pytest.mark.skipif(
     not (ROOT / "mkdocs.yml").exists(), reason="no mkdocs.yml (not a source checkout)"
