@@ -11,10 +11,25 @@ Nothing outside knows a paper's numbers.
 - `nath`: Nath, Dawson, Tatlicioglu, *Euclidean position estimation of static features
   using a moving uncalibrated camera* (the adaptive least-squares estimator). Problem:
   `static_points` (`StaticPointsProblem`, `static_points_problem`).
+
+Beyond the three papers:
+
+- `spica`: Spica, Robuffo Giordano, Chaumette, *Active Structure from Motion: Application
+  to Point, Sphere, and Cylinder* (the observer of the depth of static points). Problem:
+  `point-depth` (`spica.PointDepthProblem`, `spica.point_depth_problem`; variants
+  `planar` and `spherical`).
+- `hamel`: Hamel, Mahony, Trumpf, Morin, Hua, *Homography estimation on the Special Linear
+  group based on direct point correspondence* (the observer on SL(3)).
 """
 
 from .. import studies as _studies
-from . import chitrakaran as chitrakaran, jang as jang, nath as nath
+from . import (
+    chitrakaran as chitrakaran,
+    hamel as hamel,
+    jang as jang,
+    nath as nath,
+    spica as spica,
+)
 from ._files import (
     FileEstimate as FileEstimate,
     moving_point_file_reproduction as moving_point_file_reproduction,
@@ -60,5 +75,12 @@ _studies.register_problem(
     static_points_problem,
     aliases=("euclidean",),
     summary="positions of static features, uncalibrated moving camera (Nath et al.)",
+    replace=True,
+)
+_studies.register_problem(
+    "point-depth",
+    spica.point_depth_problem,
+    variants=("planar", "spherical"),
+    summary="depth of static points, moving camera with known velocity (Spica et al.)",
     replace=True,
 )

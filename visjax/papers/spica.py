@@ -38,15 +38,24 @@ equations are cited by name, not number; each is the model above, checked agains
 kinematics by the tests.
 """
 
-from typing import ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ..estimators import AbstractEstimator, Stream, checked_samples
+from .._results import RESULTS
+from ..baselines import triangulate_point
+from ..estimators import (
+    AbstractEstimator,
+    Stream,
+    checked_samples,
+    moving_point_stream,
+    run,
+)
 from ..geometry import pixel_to_normalized, skew
+from ..studies import AbstractProblem, Parameter
 
 _Projection = Literal["planar", "spherical"]
 
@@ -209,3 +218,174 @@ def point_depth_stream(
         m = m / jnp.linalg.norm(m, axis=-1, keepdims=True)
     stream = Stream(ts=ts, ys=PointDepthMeasurement(s=m, u=twists), truth=truth)
     return checked_samples(stream, "point_depth_stream", throw)
+
+
+# ---------------------------------------------------------------------------------------
+# The problem `point-depth`: the inverse depth of static points seen by a camera moving with
+# a known velocity (scene of its own: not the paper's motion)
+
+POINTS = (
+    (0.1, -0.05, 0.5),
+    (-0.3, 0.2, 1.2),
+    (0.4, 0.3, 2.0),
+    (-0.6, -0.4, 2.5),
+    (0.2, -0.7, 3.0),
+)  # five static points at 0.5-3 m in front of the camera's start (its frame: the world's)
+TWIST = (
+    0.3,
+    0.2,
+    0.05,
+    0.02,
+    -0.03,
+    0.05,
+)  # constant (world frame): sideways and forwards, turning
+CAMERA = ((600.0, 0.0, 320.0), (0.0, 600.0, 240.0), (0.0, 0.0, 1.0))  # intrinsics, pixels
+
+
+class PointDepthScene(eqx.Module):
+    """The scene of `point_depth_scene`: `ts` (N,), `points` (N, n, 3) in the camera frame
+    (the truth), `pixels` (N, n, 2), `twists` (N, 6) the camera's twist in its own frame
+    $(v, \\omega)$, `K` (3, 3)."""
+
+    ts: Float[Array, " N"]
+    points: Float[Array, "N n 3"]
+    pixels: Float[Array, "N n 2"]
+    twists: Float[Array, "N 6"]
+    K: Float[Array, "3 3"]
+
+
+def point_depth_scene(duration: float = 1.0, rate_hz: float = 1000.0) -> PointDepthScene:
+    """Five static points (`POINTS`) seen by a camera moving with the constant twist
+    `TWIST` (closed form, `visjax.sim.constant_twist_trajectory`), `duration` s at
+    `rate_hz`."""
+    from ..sim import CameraRig, constant_twist_trajectory, points_in_camera, sample_times, view
+
+    ts = sample_times(duration, rate_hz)
+    body = constant_twist_trajectory(jnp.asarray(TWIST), jnp.zeros(3), jnp.eye(3), ts)
+    rig = CameraRig(A=jnp.asarray(CAMERA), image_size=None)
+    P = points_in_camera(rig, jnp.asarray(POINTS), body)
+    R_T = jnp.swapaxes(body.R, 1, 2)
+    v = jnp.einsum("kij,kj->ki", R_T, body.twist[:, :3])
+    w = jnp.einsum("kij,kj->ki", R_T, body.twist[:, 3:])
+    return PointDepthScene(
+        ts=ts, points=P, pixels=view(rig, P), twists=jnp.concatenate([v, w], axis=1), K=rig.A
+    )
+
+
+class LeastSquaresDepth(eqx.Module):
+    """The least-squares baseline's solution: `ts`, `depth` (N, n) (NaN before a window
+    determines a point), `result` (the first failure over the points)."""
+
+    ts: Float[Array, " N"]
+    depth: Float[Array, "N n"]
+    result: Any
+
+
+class PointDepthProblem(AbstractProblem):
+    """The depth of static points from a moving calibrated camera with known velocity
+    (Spica et al.'s observer, module docstring), against a sliding-window least-squares
+    triangulation on the same measurements (`visjax.baselines.triangulate_point`, the last
+    `window` frames).
+
+    Metrics: `depth_error` the worst relative depth error over the points at the last
+    sample; `time_to_5pct` the first time from which every point's relative error stays
+    below 5% (the run's length if never)."""
+
+    methods: ClassVar[tuple] = ("estimator", "least_squares")
+    metric: ClassVar[str] = "depth_error"
+    label: ClassVar[str] = "worst relative depth error at the end (-)"
+    grid: ClassVar[str] = "alpha=100:3000:5"
+    title: ClassVar[str] = "depth of static points, moving camera (Spica et al.)"
+
+    scene: PointDepthScene
+    noise_px: float = eqx.field(static=True, default=0.0)
+    projection: str = eqx.field(static=True, default="planar")
+    window: int = eqx.field(static=True, default=250)
+
+    def parameters(self):
+        return {
+            "alpha": Parameter(1000.0, "1/m^2", True, "the inverse depth's gain"),
+            "h": Parameter(20.0, "1/s", True, "the measured part's gain, H = h I"),
+            "chi0": Parameter(1.0 / 1.5, "1/m", True, "the initial inverse depth"),
+        }
+
+    def settings(self):
+        return {
+            "noise_px": self.noise_px,
+            "projection": self.projection,
+            "window_samples": self.window,
+            "samples": int(self.scene.ts.shape[0]),
+        }
+
+    def inputs(self, key):
+        noise = jax.random.normal(key, self.scene.pixels.shape, self.scene.pixels.dtype)
+        return self.scene.pixels + self.noise_px * noise
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        sc = self.scene
+        if method == "estimator":
+            observer = PointDepthObserver(
+                alpha=params["alpha"],
+                h=params["h"],
+                chi0=params["chi0"],
+                projection=self.projection,
+            )
+            stream = point_depth_stream(
+                sc.ts, inputs, sc.twists, sc.K, projection=self.projection, throw=False
+            )
+            return run(observer, stream, throw=False)
+
+        def one(pixels):
+            stream = moving_point_stream(sc.ts, pixels, sc.twists, sc.K, throw=False)
+            sol = triangulate_point(stream, window=self.window, throw=False)
+            depth = sol.outputs.position[:, 2]
+            if self.projection == "spherical":
+                depth = jnp.linalg.norm(sol.outputs.position, axis=-1)
+            return depth, sol.result
+
+        depth, results = jax.vmap(one, in_axes=1, out_axes=(1, 0))(inputs)
+        # the first failure over the points (a result per point, batched by vmap)
+        result = RESULTS.successful
+        for k in range(depth.shape[1]):
+            result_k = jax.tree_util.tree_map(lambda v, k=k: v[k], results)
+            result = RESULTS.where(result == RESULTS.successful, result_k, result)
+        return LeastSquaresDepth(ts=sc.ts, depth=depth, result=result)
+
+    def _truth(self):
+        P = self.scene.points
+        return P[..., 2] if self.projection == "planar" else jnp.linalg.norm(P, axis=-1)
+
+    def metrics(self, method, solution):
+        depth = solution.outputs.depth if method == "estimator" else solution.depth
+        err = jnp.abs(depth / self._truth() - 1.0)  # (N, n); NaN before a window
+        within = jnp.all(err < 0.05, axis=1)  # NaN compares False
+        settled = jnp.flip(jnp.cumprod(jnp.flip(within)))  # within from here to the end
+        ts = self.scene.ts
+        first = jnp.argmax(settled)
+        time = jnp.where(jnp.any(settled), ts[first] - ts[0], ts[-1] - ts[0])
+        return {"depth_error": jnp.max(err[-1]), "time_to_5pct": time}
+
+
+def point_depth_problem(
+    *,
+    noise_px: float = 0.0,
+    duration: float = 1.0,
+    rate_hz: float = 1000.0,
+    variant: str | None = None,
+    window_s: float = 0.25,
+) -> PointDepthProblem:
+    """The `point-depth` problem on `point_depth_scene(duration, rate_hz)` with Gaussian
+    pixel noise `noise_px`; `variant` (`--set`) the projection, `"planar"` (default) or
+    `"spherical"`; `window_s` the least-squares baseline's window (s)."""
+    projection = variant or "planar"
+    if projection not in PointDepthObserver.dims:
+        raise ValueError(f'the variant must be "planar" or "spherical"; got {variant!r}.')
+    if not noise_px >= 0:
+        raise ValueError(f"`noise_px` must be non-negative; got {noise_px!r}.")
+    window = max(2, int(round(window_s * rate_hz)))
+    return PointDepthProblem(
+        scene=point_depth_scene(duration, rate_hz),
+        noise_px=float(noise_px),
+        projection=projection,
+        window=window,
+    )

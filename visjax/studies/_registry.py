@@ -9,6 +9,7 @@ command line: a module named with `visjax --import MODULE`, or an entry point of
 
 import dataclasses
 import inspect
+import re
 from collections.abc import Callable, Sequence
 
 from ._problem import AbstractProblem
@@ -77,6 +78,9 @@ _ALIASES: dict[str, str] = {}
 _LOADED = False
 
 
+_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
+
+
 def register_problem(
     name: str,
     build: Callable[..., AbstractProblem],
@@ -91,8 +95,13 @@ def register_problem(
     `build(**options) -> AbstractProblem`, called with the options the user gives (any of
     `data`, `noise_px`, `duration`, `rate_hz`, `variant`); the options it does not accept
     are refused with a clear error. A name already taken is an error unless `replace`."""
-    if not (isinstance(name, str) and name.isidentifier()):
-        raise ValueError(f"a problem's name must be an identifier; got {name!r}.")
+    # a command-line word: letters, digits, `_` and `-` (`point-depth`), starting with a
+    # letter (not an option's `-`)
+    if not (isinstance(name, str) and _NAME.fullmatch(name)):
+        raise ValueError(
+            f"a problem's name must be letters, digits, '_' or '-', starting with a letter; "
+            f"got {name!r}."
+        )
     if not callable(build):
         raise TypeError(f"`build` of problem {name!r} must be callable.")
     taken = name in _REGISTRY or name in _ALIASES
