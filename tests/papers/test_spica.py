@@ -173,6 +173,14 @@ def test_problem_estimator_and_least_squares_on_the_same_draws():
     ls = studies.evaluate(noisy, None, jnp.arange(3), method="least_squares")
     failed = np.asarray(ls.result._value) != RESULTS.successful._value
     assert np.all(np.isnan(np.asarray(ls.metrics["depth_error"])[failed]))
+    # the EKF baseline: near exact without noise (measured 1e-4); with noise a run whose
+    # inverse depth leaves the positive half-line is `diverged`, never a number
+    ekf = studies.evaluate(clean, None, jnp.arange(1), method="ekf")
+    assert float(ekf.metrics["depth_error"][0]) < 1e-3
+    ekf = studies.evaluate(noisy, None, jnp.arange(3), method="ekf")
+    codes = np.asarray(ekf.result._value)
+    assert set(codes.tolist()) <= {int(RESULTS.successful._value), int(RESULTS.diverged._value)}
+    assert np.all(np.isnan(np.asarray(ekf.metrics["depth_error"])[codes != 0]))
 
 
 def test_compare_command(tmp_path):
@@ -182,7 +190,7 @@ def test_compare_command(tmp_path):
     argv = ["compare", "point-depth", "--seeds", "2", "--noise", "0.5", "--quiet"]
     assert main([*argv, "--out", str(out)]) == 0
     records = pd.read_parquet(out / "records.parquet")
-    assert set(records["method"]) == {"estimator", "least_squares"}
+    assert set(records["method"]) == {"estimator", "least_squares", "ekf"}
     assert list(records["seed"]) == [0, 1, 0, 1] or set(records["seed"]) == {0, 1}
     est = records[records["method"] == "estimator"]
     assert (est["result"] == "successful").all() and (est["depth_error"] < 0.03).all()

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS
-from ..baselines import triangulate_point
+from ..baselines import AbstractEKFModel, extended_kalman_filter, triangulate_point
 from ..estimators import (
     AbstractEstimator,
     Stream,
@@ -220,6 +220,36 @@ def point_depth_stream(
     return checked_samples(stream, "point_depth_stream", throw)
 
 
+class InverseDepthModel(AbstractEKFModel):
+    """The EKF baseline's model of one point (planar projection), state $(x, y, \\chi)$:
+    the transition is an Euler step of the model of the module docstring under the held
+    camera twist `u` (6,), the measurement is $(x, y)$. `q_s`, `q_chi`: the process noise
+    densities of the image coordinates and of the inverse depth (per second); `r` the
+    measurement variance (normalized coordinates squared)."""
+
+    q_s: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    q_chi: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+    r: Float[Array, ""] = eqx.field(converter=jnp.asarray)
+
+    def transition(self, x, u, dt):
+        s, chi = x[:2], x[2]
+        f_m, omega = point_model(s, u, "planar")
+        s_dot = f_m + omega * chi
+        return jnp.concatenate([s + dt * s_dot, (chi + dt * point_depth_rate(s, chi, u))[None]])
+
+    def process_noise(self, x, u, dt):
+        return jnp.diag(jnp.stack([self.q_s, self.q_s, self.q_chi])) * dt
+
+    def measure(self, x, u):
+        return x[:2]
+
+    def measurement_noise(self, x, u):
+        return self.r * jnp.eye(2, dtype=x.dtype)
+
+    def valid(self, x, u):
+        return x[2] > 0
+
+
 # ---------------------------------------------------------------------------------------
 # The problem `point-depth`: the inverse depth of static points seen by a camera moving with
 # a known velocity (scene of its own: not the paper's motion)
@@ -272,8 +302,17 @@ def point_depth_scene(duration: float = 1.0, rate_hz: float = 1000.0) -> PointDe
     )
 
 
+def _first_failure(results, n):
+    """The first failure over `n` points' results (batched by `vmap`), or success."""
+    result = RESULTS.successful
+    for k in range(n):
+        result_k = jax.tree_util.tree_map(lambda v, k=k: v[k], results)
+        result = RESULTS.where(result == RESULTS.successful, result_k, result)
+    return result
+
+
 class LeastSquaresDepth(eqx.Module):
-    """The least-squares baseline's solution: `ts`, `depth` (N, n) (NaN before a window
+    """A baseline's solution: `ts`, `depth` (N, n) (NaN before a least-squares window
     determines a point), `result` (the first failure over the points)."""
 
     ts: Float[Array, " N"]
@@ -285,13 +324,16 @@ class PointDepthProblem(AbstractProblem):
     """The depth of static points from a moving calibrated camera with known velocity
     (Spica et al.'s observer, module docstring), against a sliding-window least-squares
     triangulation on the same measurements (`visjax.baselines.triangulate_point`, the last
-    `window` frames).
+    `window` frames) and an EKF on inverse depth per point (`InverseDepthModel`; planar
+    coordinates for both projections: its prior is the observer's `chi0` with a standard
+    deviation of `chi0`, its measurement noise the problem's pixel noise, at least 0.1 px,
+    its process noise 1e-8 per second on every state).
 
     Metrics: `depth_error` the worst relative depth error over the points at the last
     sample; `time_to_5pct` the first time from which every point's relative error stays
     below 5% (the run's length if never)."""
 
-    methods: ClassVar[tuple] = ("estimator", "least_squares")
+    methods: ClassVar[tuple] = ("estimator", "least_squares", "ekf")
     metric: ClassVar[str] = "depth_error"
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
@@ -335,6 +377,9 @@ class PointDepthProblem(AbstractProblem):
             )
             return run(observer, stream, throw=False)
 
+        if method == "ekf":
+            return self._ekf(params, inputs)
+
         def one(pixels):
             stream = moving_point_stream(sc.ts, pixels, sc.twists, sc.K, throw=False)
             sol = triangulate_point(stream, window=self.window, throw=False)
@@ -344,12 +389,33 @@ class PointDepthProblem(AbstractProblem):
             return depth, sol.result
 
         depth, results = jax.vmap(one, in_axes=1, out_axes=(1, 0))(inputs)
-        # the first failure over the points (a result per point, batched by vmap)
-        result = RESULTS.successful
-        for k in range(depth.shape[1]):
-            result_k = jax.tree_util.tree_map(lambda v, k=k: v[k], results)
-            result = RESULTS.where(result == RESULTS.successful, result_k, result)
-        return LeastSquaresDepth(ts=sc.ts, depth=depth, result=result)
+        return LeastSquaresDepth(
+            ts=sc.ts, depth=depth, result=_first_failure(results, depth.shape[1])
+        )
+
+    def _ekf(self, params, inputs):
+        sc = self.scene
+        focal = sc.K[0, 0]
+        sigma = max(self.noise_px, 0.1)
+        model = InverseDepthModel(q_s=1e-8, q_chi=1e-8, r=(sigma / focal) ** 2)
+        chi0 = params["chi0"]
+
+        def one(pixels):
+            m = pixel_to_normalized(pixels, sc.K)
+            x0 = jnp.stack([m[0, 0], m[0, 1], chi0])
+            P0 = jnp.diag(jnp.stack([model.r, model.r, chi0**2]))
+            sol = extended_kalman_filter(model, sc.ts, m, sc.twists, x0, P0, throw=False)
+            chi = sol.outputs.x[:, 2]
+            if self.projection == "spherical":  # the distance along the measured bearing
+                depth = jnp.sqrt(1.0 + jnp.sum(m**2, axis=-1)) / chi
+            else:
+                depth = 1.0 / chi
+            return depth, sol.result
+
+        depth, results = jax.vmap(one, in_axes=1, out_axes=(1, 0))(inputs)
+        return LeastSquaresDepth(
+            ts=sc.ts, depth=depth, result=_first_failure(results, depth.shape[1])
+        )
 
     def _truth(self):
         P = self.scene.points
