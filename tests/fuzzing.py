@@ -1029,12 +1029,88 @@ def fuzz_streams(n, seed, dtype):
     return out
 
 
+def fuzz_sl3(n, seed, dtype):
+    """SL(3): `sl3_project` against $M - \\mathrm{tr}(M)/3\\, I$ in NumPy (well-posed:
+    entries 1e-3..1e3; near-degenerate: 1e-12..1e12); `sl3_exp` against SciPy's `expm`
+    of the projection (well-posed: norms up to 3; near-degenerate: tiny norms, 1e-12..1e-3,
+    and large ones, 10..30); `sl3_normalize` against $H / \\det(H)^{1/3}$ (well-posed:
+    well-conditioned matrices; near-degenerate: the same scaled by 1e-12..1e12). Invalid:
+    a NaN or inf entry; `sl3_exp` and `sl3_normalize` then give NaN (a result code)."""
+    import numpy as np
+    import scipy.linalg
+
+    from visjax import geometry as g
+
+    rng = np.random.default_rng(seed + 23)
+    eps = float(np.finfo(dtype).eps)
+    out = {}
+    for kind in KINDS:
+        # the projection: linear, no error path (NaN and inf reach the entries they touch)
+        (M,) = _poison(rng, kind, _magnitudes(rng, kind, n, (3, 3)))
+        M = np.asarray(M, dtype)
+        Mf = M.astype(float)
+        with np.errstate(invalid="ignore"):
+            ref = Mf - np.trace(Mf, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
+        scale = np.maximum(np.max(np.where(np.isfinite(Mf), np.abs(Mf), 0.0), (1, 2)), 1e-300)
+        c = _counts()
+        _against_reference(c, kind, _vm(g.sl3_project)(M), ref, scale, 64 * eps)
+        out.setdefault("sl3_project", {})[kind] = c
+
+        # the exponential
+        X = rng.normal(size=(n, 3, 3))
+        X /= np.linalg.norm(X, axis=(1, 2), keepdims=True)
+        if kind == "near_degenerate":
+            big = rng.random(n) < 0.5
+            size = np.where(big, rng.uniform(10, 30, n), 10.0 ** rng.uniform(-12, -3, n))
+        else:
+            size = rng.uniform(0, 3, n)
+        X = X * size[:, None, None]
+        (X,) = _poison(rng, kind, X)
+        X = np.asarray(X, dtype)
+        E = np.asarray(_vm(g.sl3_exp)(X), float)
+        c = _counts()
+        if kind == "invalid":
+            _nan_in_nan_out(c, E)
+        else:
+            Xf = X.astype(float)
+            Y = Xf - np.trace(Xf, axis1=1, axis2=2)[:, None, None] / 3.0 * np.eye(3)
+            ref = np.stack([scipy.linalg.expm(y) for y in Y])
+            err = np.max(np.abs(E - ref), (1, 2)) / np.max(np.abs(ref), (1, 2))
+            # rounding grows with the squarings (up to 12) and the norm
+            tol = 1e3 * eps * (1.0 + np.linalg.norm(Y, axis=(1, 2)))
+            finite = np.all(np.isfinite(E.reshape(n, -1)), 1)
+            _classify(np.ones(n, bool), finite, err / tol, 1.0, c)
+        out.setdefault("sl3_exp", {})[kind] = c
+
+        # the unit-determinant representative
+        H = _rotations(rng, n) + 0.3 * rng.normal(size=(n, 3, 3))
+        if kind == "near_degenerate":
+            H = H * (10.0 ** rng.uniform(-12, 12, n))[:, None, None]
+        (H,) = _poison(rng, kind, H)
+        H = np.asarray(H, dtype)
+        N = np.asarray(_vm(g.sl3_normalize)(H), float)
+        c = _counts()
+        if kind == "invalid":
+            _nan_in_nan_out(c, N)
+        else:
+            Hf = H.astype(float)
+            d = np.linalg.det(Hf / np.max(np.abs(Hf), (1, 2))[:, None, None])
+            ref = Hf / np.max(np.abs(Hf), (1, 2))[:, None, None] / np.cbrt(d)[:, None, None]
+            cond = np.linalg.cond(Hf)
+            err = np.max(np.abs(N - ref), (1, 2)) / np.max(np.abs(ref), (1, 2))
+            ok = np.all(np.isfinite(N.reshape(n, -1)), 1)  # NaN: a singular matrix's code
+            _classify(ok, ok, err / (64 * eps * cond), 1.0, c)
+        out.setdefault("sl3_normalize", {})[kind] = c
+    return out
+
+
 PARTS = (
     "fuzz_reconstruction",
     "fuzz_camera",
     "fuzz_so3",
     "fuzz_decomposition",
     "fuzz_so3_helpers",
+    "fuzz_sl3",
     "fuzz_algebra",
     "fuzz_select_solution",
     "fuzz_camera_matrix_lstsq",

@@ -94,8 +94,14 @@ def _sl3_exp(X):
 
 @jax.jit
 def _sl3_normalize(H):
-    d = det3(H)
-    ok = jnp.isfinite(d) & (d != 0.0)
+    # scaled by its largest entry first: the determinant of a matrix of entries 1e-12 or
+    # 1e12 would under- or overflow (float32 already at 1e-13 and 1e13), the result is
+    # the same
+    m = jnp.max(jnp.abs(H))
+    m_ok = jnp.isfinite(m) & (m > 0)
+    H1 = H / jnp.where(m_ok, m, 1.0)
+    d = det3(H1)
+    ok = m_ok & jnp.isfinite(d) & (d != 0.0)
     d_safe = jnp.where(ok, d, 1.0)
     scale = jnp.sign(d_safe) * jnp.abs(d_safe) ** (1.0 / 3.0)
-    return jnp.where(ok, H / scale, jnp.nan)
+    return jnp.where(ok, H1 / scale, jnp.nan)
