@@ -19,7 +19,9 @@ Beyond the three papers:
   `point-depth` (`spica.PointDepthProblem`, `spica.point_depth_problem`; variants
   `planar` and `spherical`).
 - `hamel`: Hamel, Mahony, Trumpf, Morin, Hua, *Homography estimation on the Special Linear
-  group based on direct point correspondence* (the observer on SL(3)).
+  group based on direct point correspondence* (the observer on SL(3)). Problem:
+  `homography` (`hamel.HomographyProblem`, `hamel.VelocityFrontEndProblem`,
+  `hamel.homography_problem`; variants `tracking` and `velocity_front_end`).
 """
 
 from .. import studies as _studies
@@ -82,5 +84,12 @@ _studies.register_problem(
     spica.point_depth_problem,
     variants=("planar", "spherical"),
     summary="depth of static points, moving camera with known velocity (Spica et al.)",
+    replace=True,
+)
+_studies.register_problem(
+    "homography",
+    hamel.homography_problem,
+    variants=("tracking", "velocity_front_end"),
+    summary="homography of a planar target on SL(3), moving camera (Hamel et al.)",
     replace=True,
 )
