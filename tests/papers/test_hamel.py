@@ -2,6 +2,7 @@
 against a NumPy transcription, the truth kept with det 1, convergence from the identity,
 the Lyapunov function decreasing, jit/vmap/grad, bad input."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -226,10 +227,11 @@ def test_compare_command_and_a_failed_frame(tmp_path, tracking, no_jaxtyping):
 
 
 def test_velocity_front_end(tracking):
-    """The observer as the velocity problem's front end (1 s at 200 Hz, noise-free): its
+    """The observer as the velocity problem's front end (1 s at 250 Hz, noise-free): its
     pixels start on the reference image and stay within 3 px of the truth (measured 1.6
-    px), and `four_point` is the velocity problem's estimator itself."""
-    problem = hamel.homography_problem(variant="velocity_front_end", duration=1.0, rate_hz=200.0)
+    px), and `four_point` is the velocity problem's estimator itself. A gain too high for
+    the sample rate is refused (unstable step), its pixels NaN, never garbage."""
+    problem = hamel.homography_problem(variant="velocity_front_end", duration=1.0, rate_hz=250.0)
     base = problem.base
     inputs = problem.inputs(jax.random.PRNGKey(0))
     params = problem.resolve()
@@ -243,6 +245,11 @@ def test_velocity_front_end(tracking):
     obs = problem.solve("observer", params, inputs)
     assert obs.result == RESULTS.successful
     assert np.isfinite(problem.metrics("observer", obs)["rms_worst"])
+    too_fast = {**params, "k_P": jnp.asarray(1000.0)}
+    with pytest.raises(ValueError, match="stability bound"):  # outside jit: raised
+        problem.observed_pixels(too_fast, inputs)
+    predicted, front = eqx.filter_jit(problem.observed_pixels)(too_fast, inputs)
+    assert front.result == RESULTS.unstable_step and np.isnan(np.asarray(predicted)).all()
     assert set(studies.problem("homography", variant="tracking").methods) == set(
         hamel.HomographyProblem.methods
     )
