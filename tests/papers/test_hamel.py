@@ -117,6 +117,12 @@ def test_bad_input(scene, no_jaxtyping):
         hamel.homography_stream(ts, good_px, A[:, :2], K)
     with pytest.raises(ValueError, match="n >= 4"):
         hamel.HomographyObserver(k_P=1.0, p_ref=p_ref[:3])
+    # an estimate that sends a point more than 90 degrees from its reference direction
+    obs = hamel.HomographyObserver(k_P=1.0, p_ref=p_ref)
+    y = stream.measurement(0)
+    assert obs.valid(hamel.HomographyState(jnp.asarray(Hs[0]), jnp.zeros((3, 3))), y)
+    flipped = np.diag([1.0, -1.0, -1.0]) @ Hs[0]  # det 1, every bearing turned about x
+    assert not obs.valid(hamel.HomographyState(jnp.asarray(flipped), jnp.zeros((3, 3))), y)
     with pytest.raises(ValueError, match="H0"):
         run(hamel.HomographyObserver(k_P=1.0, p_ref=p_ref, H0=np.zeros((3, 3))), stream)
 
@@ -250,6 +256,10 @@ def test_velocity_front_end(tracking):
         problem.observed_pixels(too_fast, inputs)
     predicted, front = eqx.filter_jit(problem.observed_pixels)(too_fast, inputs)
     assert front.result == RESULTS.unstable_step and np.isnan(np.asarray(predicted)).all()
+    # the integral term's bound, dt < k_P / k_I (here 3e-4 s against 4e-3 s)
+    too_stiff = {**params, "k_P": jnp.asarray(30.0), "k_I": jnp.asarray(1e5)}
+    front = eqx.filter_jit(problem.observed_pixels)(too_stiff, inputs)[1]
+    assert front.result == RESULTS.unstable_step
     assert set(studies.problem("homography", variant="tracking").methods) == set(
         hamel.HomographyProblem.methods
     )

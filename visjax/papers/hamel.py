@@ -151,16 +151,26 @@ class HomographyObserver(AbstractJumpEstimator):
         return HomographyOutput(H=state.H, A=y.A + state.Gamma, cost=cost)
 
     def valid(self, state: HomographyState, y: HomographyMeasurement) -> Bool[Array, ""]:
-        # an invertible estimate (det 1 after each jump; far from 0 between them)
-        return jnp.abs(jnp.linalg.det(state.H)) > 1e-6
+        # an invertible estimate (det 1 after each jump; far from 0 between them) that maps
+        # every current direction to within 90 degrees of its reference direction: beyond,
+        # a point would be sent behind the reference camera (RESULTS.diverged)
+        e = _bearings(state.H, y.p)
+        ahead = jnp.all(jnp.sum(e * self.p_ref, axis=-1) > 0)
+        return (jnp.abs(jnp.linalg.det(state.H)) > 1e-6) & ahead
 
     def max_stable_dt(self, y: HomographyMeasurement):
-        """Euler on the linearised error $\\dot E = k_P \\Delta E$: near $E = I$,
-        $\\Delta \\approx -\\sum_i \\Pi_i\\, \\varepsilon\\, \\mathring p_i \\mathring p_i^T$
-        ($E = I + \\varepsilon$, $\\Pi_i = I - \\mathring p_i \\mathring p_i^T$), a map of norm
-        at most $n$: $\\Delta t < 2 / (k_P n)$ suffices (the integral term neglected). A
-        longer step is refused (`RESULTS.unstable_step`), never integrated into garbage."""
-        return 2.0 / (self.k_P * self.p_ref.shape[0])
+        """Euler on the linearised error. Near $E = \\hat H H^{-1} = I + \\varepsilon$,
+        $\\Delta \\approx -L\\varepsilon$ with $L\\varepsilon = \\sum_i \\Pi_i\\, \\varepsilon\\,
+        \\mathring p_i \\mathring p_i^T$ ($\\Pi_i = I - \\mathring p_i \\mathring p_i^T$), a
+        symmetric positive semi-definite map of eigenvalues $\\mu \\in [0, n]$; then
+        $\\dot\\varepsilon = -k_P L\\varepsilon - \\tilde\\Gamma$,
+        $\\dot{\\tilde\\Gamma} = k_I L \\varepsilon$: per mode
+        $\\lambda^2 + k_P\\mu\\lambda + k_I\\mu = 0$. Euler is stable for real roots when
+        $\\Delta t < 2/(k_P n)$ and for complex ones when $\\Delta t < k_P / k_I$ (from
+        $|1 + \\lambda\\Delta t| < 1$, whatever $\\mu$): the smaller bound. A longer step is
+        refused (`RESULTS.unstable_step`), never integrated into garbage."""
+        bound = 2.0 / (self.k_P * self.p_ref.shape[0])
+        return jnp.where(self.k_I > 0, jnp.minimum(bound, self.k_P / self.k_I), bound)
 
     def checks(self):
         d = jnp.linalg.det(self.H0)
