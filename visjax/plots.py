@@ -825,12 +825,14 @@ def plot_sweep(
     path=None,
     formats=("png",),
     units=None,
+    paper_label="paper",
 ):
     """`visjax sweep` and `visjax tune`: the metric against each parameter (log-log), one
     panel per parameter. Grey dots: every point's mean over seeds; the line: the best mean
     at each value of the parameter (over the other parameters), with the spread over seeds
     (min to max) as a band; points with a failed run as red crosses at the top; the best
-    point (star) and the paper's gains (square) marked with their held-out metric.
+    point (star) and the paper's gains (square; `paper_label` names them, e.g.
+    `"defaults"` where the defaults are not a paper's) marked with their held-out metric.
 
     `summary` is `studies.summarise(table, metric)`; `best` and `paper` are dicts with
     `params` and `metric`; `label` the metric's axis label, with its unit (in brackets, or in
@@ -877,7 +879,7 @@ def plot_sweep(
                 )
             for mark, style, name in (
                 (best, "*", "best (held-out)"),
-                (paper, "s", "paper (held-out)"),
+                (paper, "s", f"{paper_label} (held-out)"),
             ):
                 if (
                     mark is not None

@@ -329,6 +329,7 @@ def _print_result(tag, problem, held, extra=""):
     for name, r in held.items():
         values = ", ".join(f"{k} = {np.round(v, 4).tolist()}" for k, v in r["params"].items())
         failed = f" ({r['failed']} held-out run(s) failed)" if r["failed"] else ""
+        name = problem.defaults_label if name == "paper" else name  # the JSON key stays
         print(
             f"{head}{name:<11} {values:<40} held-out {problem.metric} = {r['metric']:.4g}{failed}"
         )
@@ -398,6 +399,7 @@ def sweep_command(
                 list(best["params"]),
                 best=held["best"],
                 paper=held["paper"],
+                paper_label=p.defaults_label,
                 label=p.label,
                 title=p.title,
                 path=folder / "sweep.png",
@@ -503,6 +505,7 @@ def tune_command(
                 list(best["params"]),
                 best=held["tuned"],
                 paper=held["paper"],
+                paper_label=p.defaults_label,
                 label=p.label,
                 title=p.title,
                 path=folder / "sweep.png",

@@ -2,6 +2,8 @@
 against a NumPy transcription, the truth kept with det 1, convergence from the identity,
 the Lyapunov function decreasing, jit/vmap/grad, bad input."""
 
+import json
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -263,3 +265,22 @@ def test_velocity_front_end(tracking):
     assert set(studies.problem("homography", variant="tracking").methods) == set(
         hamel.HomographyProblem.methods
     )
+
+
+def test_sweep_and_run_commands(tmp_path, capsys):
+    """`visjax sweep homography` and `visjax run homography` with no other change: the
+    grid's rows, the defaults reported as visjax's own ("defaults", the JSON key staying
+    `paper`), the run's figure."""
+    out = tmp_path / "sweep"
+    argv = ["sweep", "homography", "--set", "tracking", "--duration", "0.4", "--seeds", "1"]
+    assert main([*argv, "--grid", "k_P=30/100", "--quiet", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "[tracking] defaults " in printed and "[tracking] paper " not in printed
+    table = pd.read_parquet(next(out.rglob("runs.parquet")))
+    assert sorted(table["k_P"]) == [30.0, 100.0] and (table["result"] == "successful").all()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["sets"]["tracking"]["paper"]["params"]["k_P"] == 30.0
+    run_out = tmp_path / "run"
+    argv = ["run", "homography", "--set", "tracking", "--duration", "0.4", "--quiet"]
+    assert main([*argv, "--out", str(run_out)]) == 0
+    assert next(run_out.rglob("run.png")).stat().st_size > 0

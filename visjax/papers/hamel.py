@@ -374,6 +374,7 @@ class HomographyProblem(AbstractProblem):
     label: ClassVar[str] = "RMS of |H_hat H^-1 - I| over the second half (-)"
     grid: ClassVar[str] = "k_P=3:200:5"
     title: ClassVar[str] = "homography of a planar target (Hamel et al.)"
+    defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 
     scene: HomographyScene
     noise_px: float = eqx.field(static=True, default=0.0)
@@ -476,6 +477,7 @@ class VelocityFrontEndProblem(AbstractProblem):
 
     methods: ClassVar[tuple] = ("observer", "four_point")
     grid: ClassVar[str] = "k_P=10:400:4,k_I=100:100000:4"
+    defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 
     base: Any  # the velocity problem (`VelocityProblem`)
 

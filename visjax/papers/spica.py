@@ -340,6 +340,7 @@ class PointDepthProblem(AbstractProblem):
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
     title: ClassVar[str] = "depth of static points, moving camera (Spica et al.)"
+    defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 
     scene: PointDepthScene
     noise_px: float = eqx.field(static=True, default=0.0)
@@ -432,6 +433,26 @@ class PointDepthProblem(AbstractProblem):
         first = jnp.argmax(settled)
         time = jnp.where(jnp.any(settled), ts[first] - ts[0], ts[-1] - ts[0])
         return {"depth_error": jnp.max(err[-1]), "time_to_5pct": time}
+
+    def figure(self, method, solution):
+        """The relative depth error of every point over time (log scale), the 5% line."""
+        import matplotlib.pyplot as plt
+        import numpy as np
+
+        depth = solution.outputs.depth if method == "estimator" else solution.depth
+        err = np.abs(np.asarray(depth) / np.asarray(self._truth()) - 1.0)
+        ts = np.asarray(self.scene.ts)
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        for i in range(err.shape[1]):
+            z = float(np.asarray(self._truth())[0, i])
+            ax.semilogy(ts, err[:, i], lw=0.8, label=f"point {i + 1} ({z:.1f} m)")
+        ax.axhline(0.05, color="k", lw=0.6, ls="--")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("relative depth error")
+        ax.set_title(f"{self.title}: {method}, {self.projection}, {self.noise_px:g} px")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        return fig
 
 
 def point_depth_problem(

@@ -77,14 +77,18 @@ class AbstractProblem(eqx.Module):
     latency); `gains(params)` (the gains a parameter point stands for, JSON-able: where
     parameters are multipliers, the absolute gains); `checks(params)` (extra checks of a
     chosen point, e.g. a stability certificate, JSON-able, merged into the sweep's and
-    tune's summaries) and `check_lines(summary)` (them, as printed lines); and
-    `figure(method, solution)` (a matplotlib figure of one solution against the truth).
+    tune's summaries) and `check_lines(summary)` (them, as printed lines);
+    `figure(method, solution)` (a matplotlib figure of one solution against the truth); and
+    `defaults_label` (what printed reports and figures call the default parameters:
+    `"paper"` where they are a paper's published gains, else e.g. `"defaults"`; the
+    summaries' JSON key stays `paper`).
     """
 
     methods: eqx.AbstractClassVar[tuple[str, ...]]
     metric: eqx.AbstractClassVar[str]
     label: ClassVar[str] = ""
     grid: ClassVar[str] = ""
+    defaults_label: ClassVar[str] = "paper"
 
     @abc.abstractmethod
     def parameters(self) -> dict[str, Parameter]:
