@@ -194,6 +194,10 @@ def test_compare_command(tmp_path):
     assert list(records["seed"]) == [0, 1, 0, 1] or set(records["seed"]) == {0, 1}
     est = records[records["method"] == "estimator"]
     assert (est["result"] == "successful").all() and (est["depth_error"] < 0.03).all()
+    # `visjax run point-depth`: its figure (every point's relative depth error over time)
+    run_out = tmp_path / "run"
+    argv = ["run", "point-depth", "--duration", "0.3", "--quiet", "--out", str(run_out)]
+    assert main(argv) == 0 and next(run_out.rglob("run.png")).stat().st_size > 0
 
 
 # ---------------------------------------------------------------------------------------
