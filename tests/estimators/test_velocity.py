@@ -197,6 +197,15 @@ def test_gain_and_input_errors(short):
     assert m.result == RESULTS.nonfinite_pixels and np.all(np.isnan(m.e))
     with without_jaxtyping(), pytest.raises(ValueError, match="one time per frame"):
         velocity_stream(sc.ts[:3], sc.pixels, camera)
+    # four nearly coincident features far outside the image (what a diverged front end
+    # once handed on): the decomposition returns no rotation; a failed frame, not a
+    # runtime error from so3_log inside a sweep
+    far = jnp.array(
+        [[-5942.1242, -14380.0664], [-5942.0859, -14380.0499], [-5942.0653, -14380.0089],
+         [-5942.1091, -14380.0305]]
+    )  # fmt: skip
+    m = velocity_measurements(camera, far, throw=False)
+    assert m.result == RESULTS.no_physical_solution and np.all(np.isnan(m.e))
 
 
 @pytest.mark.slow

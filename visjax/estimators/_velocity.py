@@ -22,7 +22,20 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, raise_or_keep
-from .._small import from_rows, mm, mv, rows, sadjugate, sall, sdot, smm, sskew, stranspose
+from .._small import (
+    det3,
+    from_rows,
+    mm,
+    mv,
+    rows,
+    sadjugate,
+    sall,
+    sdot,
+    smax,
+    smm,
+    sskew,
+    stranspose,
+)
 from .._util import as_float, check_points, check_shape, chunked_map, positive_finite
 from ..geometry import (
     L_omega,
@@ -187,8 +200,17 @@ def velocity_measurements(
         g = mv(rec.G_n, to_homogeneous(p_ref[0]))
         p1 = jnp.where(visible[0], p_cur[0], g[:2] / g[2])
         p_cur = p_cur.at[0].set(p1)
+    # a decomposition that returned no rotation (nearly coincident points far from the
+    # image, which the DLT's degeneracy test did not name) is a failed frame: so3_log's own
+    # test, R^T R = I and det R = 1 within 10 sqrt(eps)
+    tol = 10.0 * float(jnp.finfo(A.dtype).eps) ** 0.5
+    R_off = smax(jnp.abs(mm(rec.R_bar.T, rec.R_bar) - jnp.eye(3, dtype=A.dtype)))
+    rotation = R_off + jnp.abs(det3(rec.R_bar) - 1.0) <= tol
+    rec_result = RESULTS.where(
+        (rec.result == RESULTS.successful) & ~rotation, RESULTS.no_physical_solution, rec.result
+    )
     # a failed frame is reported by its result (and NaN-filled below), never by so3_log
-    R_bar = jnp.where(rec.result == RESULTS.successful, rec.R_bar, jnp.eye(3, dtype=A.dtype))
+    R_bar = jnp.where(rec_result == RESULTS.successful, rec.R_bar, jnp.eye(3, dtype=A.dtype))
     e = error_signal(p_cur[0], p_ref[0], rec.alpha[0], R_bar)
     m1 = pixel_to_normalized(p_cur[0], A)
     R = mm(R_bar, R_star)  # eq. (8)
@@ -204,8 +226,8 @@ def velocity_measurements(
     for x in entries[1:]:
         ok = ok & jnp.isfinite(x)
     result = RESULTS.where(
-        rec.result != RESULTS.successful,
-        rec.result,
+        rec_result != RESULTS.successful,
+        rec_result,
         RESULTS.where(ok, RESULTS.successful, RESULTS.singular_jacobian),
     )
     # the reference depth is a constant of the scene: not finite or not positive (a depth
