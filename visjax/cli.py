@@ -50,6 +50,17 @@ _points = _number(int, lambda v: v >= 4, "an integer of at least 4")
 _seed = _number(int, lambda v: v >= 0, "a non-negative integer")
 
 
+def _shard(text: str):
+    """`--shard i/N`: two integers, 0 <= i < N."""
+    try:
+        i, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected i/N (e.g. 0/8), got {text!r}") from None
+    if not (n >= 1 and 0 <= i < n):
+        raise argparse.ArgumentTypeError(f"expected i/N with 0 <= i < N, got {text!r}")
+    return (i, n)
+
+
 def _formats(text: str) -> list[str]:
     chosen = [f.strip().lower() for f in text.split(",") if f.strip()]
     if not chosen or any(f not in report.FORMATS for f in chosen):
@@ -123,7 +134,8 @@ def _verb(sub, name, help, *, seeds, noise, grid):
     if grid:
         _arg(p, "--grid", _grid_spec, None, 'e.g. "K_scale=1e-2:1e1:8,rho_scale=0.1/1"')
         _arg(p, "--chunk", _count, 64, "runs per vmap call (default 64)")
-        _arg(p, "--shard", help="shard each chunk over every JAX device", action="store_true")
+        shard = "alone: each chunk over every JAX device; i/N: the i-th of N slices (sweep)"
+        _arg(p, "--shard", _shard, False, shard, nargs="?", const=True, metavar="i/N")
     return p
 
 
@@ -164,7 +176,15 @@ def build_parser() -> argparse.ArgumentParser:
     help = "a problem's methods on identical noisy inputs"
     _verb(sub, "compare", help, seeds=4, noise=0.1, grid=False)
     help = "a grid of a problem's parameters over noise seeds"
-    _verb(sub, "sweep", help, seeds=8, noise=0.1, grid=True)
+    sw = _verb(sub, "sweep", help, seeds=8, noise=0.1, grid=True)
+    _arg(sw, "--resume", help="continue an interrupted sweep from its parts", action="store_true")
+    _arg(sw, "--force", help="replace a finished sweep in --out", action="store_true")
+    ray = "run the chunks on a Ray cluster (no address: a local one; pip install visjax[ray])"
+    _arg(sw, "--ray", None, None, ray, nargs="?", const="local", metavar="ADDRESS")
+    me = sub.add_parser("merge", help="the parts of a sweep's shards as one table")
+    me.add_argument("paths", nargs="+", metavar="DIR", help="folders holding the parts")
+    _arg(me, "--out", None, None, "runs.parquet, runs.csv and summary.json", required=True)
+    _arg(me, "--quiet", help="less printing", action="store_true")
     help = "a sweep, then gradient-based tuning from its best point"
     tu = _verb(sub, "tune", help, seeds=4, noise=0.1, grid=True)
     _arg(tu, "--steps", _count, 30, "optimiser steps (default 30)")
@@ -209,7 +229,7 @@ def _call(a):
     same name (`--format` is `formats`; `--set` is `sets` or `variants`; `--data` `path`)."""
     from . import verbs
 
-    if a.command in VERBS:
+    if a.command in (*VERBS, "merge"):
         fn = getattr(verbs, f"{a.command}_command")
     elif getattr(a, "data", None) is not None:
         fn = getattr(report, f"{a.command}_data_report")

@@ -11,8 +11,11 @@ with named variants (the thesis' experiment sets) is swept and tuned variant by 
 kind `sets`.
 """
 
+import contextlib
 import functools
 import os
+import shutil
+import sys
 import time
 from pathlib import Path
 
@@ -297,7 +300,10 @@ def _grid(problem, grid):
     return spec, studies.parse_grid(spec)
 
 
-def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0):
+def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0, **durable):
+    """The sweep of the command (`durable`: `parts`, `resume`, `shard`, `executor`,
+    `max_memory`, `log` of `studies.sweep`); with a job slice (`shard`), the slice's rows
+    only (no summary nor best: those need every run, after `visjax merge`)."""
     import jax.numpy as jnp
 
     from . import studies
@@ -310,13 +316,118 @@ def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0):
         chunk=chunk,
         mesh=mesh,
         progress=not quiet,
+        **durable,
     )
+    if durable.get("shard") is not None:
+        return spec, table, None, None
     return (
         spec,
         table,
         studies.summarise(table, problem.metric),
         studies.best(table, problem.metric),
     )
+
+
+def _job_slice(shard):
+    """`--shard` without a value (or `True`): every chunk over every JAX device (a mesh);
+    `--shard i/N` (or `(i, N)`): the i-th of N disjoint slices of the runs (a job array).
+    **Returns:** `(devices, slice)`."""
+    if shard is None or shard is False:
+        return False, None
+    if shard is True or shard == "devices":
+        return True, None
+    if isinstance(shard, str):
+        try:
+            i, n = (int(x) for x in shard.split("/"))
+        except ValueError:
+            raise ValueError(f"--shard {shard!r}: expected i/N, e.g. 0/8") from None
+    else:
+        i, n = (int(x) for x in shard)
+    if not (n >= 1 and 0 <= i < n):
+        raise ValueError(f"--shard {shard!r}: expected i/N with 0 <= i < N")
+    return False, (i, n)
+
+
+def _parts_folder(folder: Path, job) -> Path:
+    """Where a sweep's parts go: beside its other outputs, in the folder the user asked
+    for (never the staging one: an interrupted sweep keeps them)."""
+    from .io import user_path
+
+    final = Path(user_path(str(folder)))
+    return final / ("parts" if job is None else f"parts-{job[0]}-of-{job[1]}")
+
+
+def _refuse_finished(folder: Path, parts: Path, resume: bool, force: bool) -> None:
+    """An output folder holding a finished sweep is replaced only with `--force`; its
+    parts are cleared with `--force` (a fresh start)."""
+    import json
+
+    from .io import user_path
+
+    final = Path(user_path(str(folder)))
+    summary = final / "summary.json"
+    if force:
+        shutil.rmtree(parts, ignore_errors=True)
+        return
+    if resume or not summary.exists():
+        return
+    try:
+        kind = json.loads(summary.read_text()).get("kind")
+    except (ValueError, OSError):
+        kind = None
+    if kind == "sweep":
+        raise ValueError(
+            f"{final} holds a finished sweep: --force to replace it, or --resume to rebuild "
+            "its table from its parts"
+        )
+
+
+class _Signals:
+    """SIGINT and SIGTERM during a sweep: the first asks it to stop after the chunk in
+    flight (`requested`, the sweep's `stop`), so that no chunk is cut in the middle of a
+    compiled call; a second stops it at once (KeyboardInterrupt)."""
+
+    def __init__(self):
+        self.requested = False
+
+    def __call__(self) -> bool:
+        return self.requested
+
+    def handler(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt()
+        self.requested = True
+        sys.stderr.write("visjax: stopping after the chunk in flight (again: at once)\n")
+
+
+@contextlib.contextmanager
+def _interruptible():
+    """SIGINT and SIGTERM handled by a `_Signals` inside the block (main thread only;
+    elsewhere nothing changes and the block gets a `_Signals` that never asks)."""
+    import signal
+    import threading
+
+    signals = _Signals()
+    if threading.current_thread() is not threading.main_thread():
+        yield signals
+        return
+    previous = {s: signal.signal(s, signals.handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield signals
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+def _saved_runs(parts: Path) -> tuple[int, int]:
+    from .studies._parts import read_manifest
+
+    try:
+        m = read_manifest(parts)
+    except ValueError:
+        return 0, 0
+    n, chunk = m["n_runs"], m["chunk"]
+    return sum(min(chunk, n - c * chunk) for c in m["done"]), n
 
 
 def _defaults_of(problem, names) -> dict:
@@ -347,29 +458,99 @@ def sweep_command(
     rate: float | None = None,
     variants=None,
     chunk: int = 64,
-    shard: bool = False,
+    shard=False,
     out=None,
     quiet: bool = False,
     seed: int = 0,
     formats=("png",),
+    resume: bool = False,
+    force: bool = False,
+    ray=None,
 ) -> dict:
     """`visjax sweep PROBLEM`: a grid of the problem's parameters (`--grid`, default the
     problem's) over `seeds` noise seeds from `seed` (`studies.sweep`), the best point by
     the mean metric, and the best point and the defaults (the paper's values) re-measured
     on `seeds` held-out seeds. Writes `runs.parquet`, `runs.csv`, `sweep.<format>` and
     `summary.json` (kind `sweep`: `{"metric", "best": {"params", "metric"}, "paper":
-    {"params", "metric"}, ...}`, the metrics held-out)."""
+    {"params", "metric"}, ...}`, the metrics held-out).
+
+    With `--out`, each chunk's rows are also written as it finishes (`parts/`, one Parquet
+    part per chunk and a manifest): an interrupted sweep (SIGINT, SIGTERM, a lost node)
+    keeps them and `--resume` continues it; `--force` replaces a finished one. `--shard
+    i/N` runs the i-th of N disjoint slices (`parts-i-of-N/`; `visjax merge` assembles
+    them); `--shard` alone shards each chunk over the JAX devices; `--ray [ADDRESS]` runs
+    the chunks as tasks on a Ray cluster (a local one without an address)."""
     started = time.perf_counter()
     settings = _settings(locals())
     command_x64()
     from . import studies
+
+    devices, job = _job_slice(shard)
+    if (resume or force or job is not None) and out is None:
+        raise ValueError("--resume, --force and --shard i/N need --out (where the parts are)")
+    if resume and force:
+        raise ValueError("--resume and --force exclude each other")
+    executor = None
+    if ray is not None and ray is not False:
+        try:
+            executor = studies.RayExecutor(address=None if ray in (True, "local") else ray)
+        except ImportError as e:
+            raise ValueError(str(e)) from None
+    try:
+        return _sweeps(
+            problem, grid, noise, seeds, data, duration, rate, variants, chunk, out, quiet,
+            seed, formats, resume, force, devices, job, executor, settings, started,
+        )  # fmt: skip
+    finally:
+        if executor is not None:
+            executor.shutdown()
+
+
+def _sweeps(
+    problem, grid, noise, seeds, data, duration, rate, variants, chunk, out, quiet, seed,
+    formats, resume, force, devices, job, executor, settings, started,
+):  # fmt: skip
+    from . import studies
     from .plots import plot_sweep
 
-    results, mesh = {}, _mesh(shard)
+    say = None if quiet else print
+    results, mesh = {}, _mesh(devices)
     for tag, p in problems(problem, data, noise, duration, rate, variants):
         if not p.scored:
             raise ValueError(f"{p.title}: a sweep needs the truth (the data file has none)")
-        spec, table, summary, best = _one_sweep(p, grid, seeds, chunk, mesh, quiet, seed)
+        folder = _folder(out, tag)
+        durable = {"shard": job, "executor": executor, "log": say}
+        if folder is not None:
+            parts = _parts_folder(folder, job)
+            _refuse_finished(folder, parts, resume, force)
+            durable.update(parts=parts, resume=resume, max_memory="available")
+        try:
+            with _interruptible() as signals:
+                spec, table, summary, best = _one_sweep(
+                    p, grid, seeds, chunk, mesh, quiet, seed, stop=signals, **durable
+                )
+        except KeyboardInterrupt:
+            if folder is None:
+                raise
+            done, n = _saved_runs(durable["parts"])
+            sys.stderr.write(
+                f"visjax: interrupted: {done} of {n} runs are saved in {durable['parts']}; "
+                "run the same command with --resume to continue\n"
+            )
+            raise SystemExit(130) from None
+        head = f"[{tag}] " if tag else ""
+        if job is not None:
+            print(
+                f"{head}shard {job[0]}/{job[1]}: {len(table)} runs written to "
+                f"{durable['parts']}; when every shard is done: visjax merge DIR... --out OUT"
+            )
+            body = {"runs": len(table), "shard": list(job), "parts": str(durable["parts"])}
+            # not written into the variant's folder: that would replace the folder, and the
+            # other slices' parts in it, when the outputs move into place
+            results[tag] = command_summary(
+                "sweep_shard", body, settings=settings, seed=seed, started=started, out=None
+            )
+            continue
         paper = _defaults_of(p, best["params"])
         held = _held_out(p, {"best": best["params"], "paper": paper}, seeds, chunk, mesh, seed)
         result = {
@@ -390,7 +571,6 @@ def sweep_command(
             **p.checks(best["params"]),
         }
         _print_result(tag, p, held, f"{result['failed_runs']} of {len(table)} sweep runs failed")
-        folder = _folder(out, tag)
         if folder is not None:
             studies.save_table(table, folder)
             plot_sweep(
@@ -406,10 +586,64 @@ def sweep_command(
                 units={k: v.units for k, v in p.parameters().items()},
                 formats=formats,
             )
+            # the parts come along with the other outputs (a copy: until the outputs are
+            # in place, the parts where they were written stay whole)
+            shutil.copytree(durable["parts"], folder / "parts", dirs_exist_ok=True)
         results[tag] = command_summary(
             "sweep", result, settings=settings, seed=seed, started=started, out=folder
         )
+    if job is not None and list(results) == [None]:
+        return results[None]
     return _result(results, settings, seed, started, out)
+
+
+def merge_command(paths, out=None, quiet: bool = False) -> dict:
+    """`visjax merge DIR...`: the parts of one sweep's shards (or of an interrupted run and
+    its resumption), found in or under each DIR, as one table: `runs.parquet`, `runs.csv`
+    and `summary.json` (kind `merge`: the runs, the sources, the best point by the mean
+    metric over the seeds when the table names its metric). Parts of different sweeps,
+    a run found twice or runs missing are refused, naming the chunks. Sweeps over several
+    variants: one table per sweep, in a folder per variant."""
+    started = time.perf_counter()
+    settings = _settings(locals())
+    from . import studies
+    from .studies._parts import find_parts, merge_parts, read_manifest
+
+    folders = find_parts(paths)
+    groups: dict[str, list] = {}
+    for f in folders:
+        groups.setdefault(read_manifest(f)["identity"], []).append(f)
+    results = {}
+    for identity, members in groups.items():
+        table, manifest = merge_parts(members)
+        # a sweep over variants: its parts folders are in the variants' folders
+        tag = Path(members[0]).parent.name if len(groups) > 1 else None
+        if tag is not None and tag in results:
+            tag = f"{tag}_{identity[:8]}"
+        metric = manifest.get("info", {}).get("metric")
+        body = {
+            "runs": len(table),
+            "chunks": manifest["n_chunks"],
+            "sources": [str(m) for m in members],
+            "failed_runs": int((table["result"] != "successful").sum()),
+            "metric": metric,
+        }
+        if metric in table.columns and (table["result"] == "successful").any():
+            try:
+                body["best"] = studies.best(table, metric)
+            except ValueError:
+                body["best"] = None
+        head = f"[{tag}] " if tag else ""
+        print(f"{head}merged {len(table)} runs from {len(members)} parts folder(s)")
+        folder = _folder(out, tag)
+        if folder is not None:
+            studies.save_table(table, folder)
+        results[tag] = command_summary(
+            "merge", body, settings=settings, seed=0, started=started, out=folder
+        )
+    if list(results) == [None]:
+        return results[None]
+    return _result(results, settings, 0, started, out)
 
 
 def tune_command(
@@ -424,7 +658,7 @@ def tune_command(
     rate: float | None = None,
     variants=None,
     chunk: int = 64,
-    shard: bool = False,
+    shard=False,
     out=None,
     quiet: bool = False,
     seed: int = 0,
@@ -446,7 +680,10 @@ def tune_command(
     from . import studies
     from .plots import plot_sweep, plot_tune_history
 
-    results, mesh = {}, _mesh(shard)
+    devices, job = _job_slice(shard)
+    if job is not None:
+        raise ValueError("--shard i/N is for sweep (tune follows one path: it needs every run)")
+    results, mesh = {}, _mesh(devices)
     for tag, p in problems(problem, data, noise, duration, rate, variants):
         if not p.scored:
             raise ValueError(f"{p.title}: tuning needs the truth (the data file has none)")

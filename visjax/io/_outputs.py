@@ -185,6 +185,19 @@ SUMMARIES = {
         "problem_settings": ("dict", "the problem's scenario"),
         "lmi?": ("dict", "moving_point on a thesis set: the LMI check of the tuned gains"),
     },
+    "sweep_shard": {
+        "runs": ("int", "the runs of this slice"),
+        "shard": ("list[int]", "`[i, N]`: the i-th of N slices (`--shard i/N`)"),
+        "parts": ("str", "the folder of the slice's parts (`visjax merge` reads them)"),
+    },
+    "merge": {
+        "runs": ("int", "runs in the merged table"),
+        "chunks": ("int", "the sweep's chunks, each one part"),
+        "sources": ("list[str]", "the parts folders merged"),
+        "failed_runs": ("int", "runs that did not succeed"),
+        "metric": ("str|null", "the sweep's metric (`null` for a functional sweep)"),
+        "best?": ("dict|null", "the best point by the mean metric over the seeds"),
+    },
     "sets": {
         "sets": (
             "dict",

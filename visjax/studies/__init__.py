@@ -8,6 +8,12 @@ The papers' problems live in `visjax.papers`.
 """
 
 from ._compare import compare as compare
+from ._executors import RayExecutor as RayExecutor
+from ._parts import (
+    PartsError as PartsError,
+    find_parts as find_parts,
+    merge_parts as merge_parts,
+)
 from ._problem import (
     AbstractProblem as AbstractProblem,
     Evaluation as Evaluation,

@@ -9,6 +9,8 @@ and `random_points` (log-uniform samples).
 
 import functools
 import math
+import os
+import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -131,6 +133,14 @@ def sweep(
     chunk: int = 64,
     mesh: jax.sharding.Mesh | None = None,
     progress: bool = False,
+    runs: Sequence[int] | None = None,
+    parts: Any = None,
+    resume: bool = False,
+    shard: tuple[int, int] | None = None,
+    executor: Any = None,
+    max_memory: int | float | str | None = None,
+    log: Callable[[str], None] | None = None,
+    stop: Callable[[], bool] | None = None,
 ):
     """Run `factory` at every parameter point for every noise seed, batched, as a table.
 
@@ -139,6 +149,13 @@ def sweep(
     points), `fixed` others (one value for every run), the rest keep their defaults. Every
     value is checked (finite; positive where the parameter must be) before any run. A
     compiled chunk is reused by a rebuilt problem with equal fields.
+
+    **Runs and their noise.** Run `i` is parameter point `i // S` with noise seed
+    `i % S` (S seeds; the seed fastest), and its noise is drawn from that seed's key alone
+    (`jax.random.key(seed)`, or the typed key given): every point sees the same noise at a
+    given seed (common random numbers, so that gains are compared on identical draws), and
+    a run's row depends on nothing but its index, whatever chunk, order, process or
+    machine computes it (`runs`, `shard`, `executor`).
 
     **Arguments:**
 
@@ -155,39 +172,63 @@ def sweep(
     - `metrics`: `solution -> {name: array}`, computed inside the batch (floating scalars
         or small arrays; an array becomes one column per component, `name[i]`).
     - `chunk`: runs per compiled `vmap` call (rounded up to a multiple of the mesh's device
-        count): memory is bounded by one chunk whatever P x S is. The last chunk is padded
-        with repeats of the last run (discarded), so one compilation serves every chunk; a
-        sweep smaller than `chunk` runs as one chunk of the next power of two. The compiled
-        chunk is cached per (`factory`, `metrics`, structure of `params`, `mesh`): a second
-        sweep of the same problem and chunk size does not compile again.
+        count): memory is bounded by one chunk whatever P x S is. Chunk `c` holds runs
+        `c * chunk` to `(c + 1) * chunk - 1`; the last is padded with repeats of the last
+        run (discarded), so one compilation serves every chunk; a sweep smaller than
+        `chunk` runs as one chunk of the next power of two. The compiled chunk is cached
+        per (`factory`, `metrics`, structure of `params`, `mesh`).
     - `mesh`: a `jax.sharding.Mesh`: each chunk's runs are sharded over all its devices (all
         mesh axes flattened) and the results gathered to every process. With
         `jax.distributed.initialize` before the call and a mesh over `jax.devices()`, the
-        same call spreads a sweep over several processes or hosts (each process builds the
-        same table; write it from `jax.process_index() == 0`). Each device runs the `vmap`
-        of its own runs (`jax.shard_map`). On a CPU, several host devices in one process
+        same call spreads a sweep over several processes or hosts in lockstep (each
+        process builds the same table; write it from `jax.process_index() == 0`): one
+        program across the GPUs of a node. On a CPU, several host devices in one process
         (`--xla_force_host_platform_device_count`) were seen to hang on the full
         estimators' programs: use one process per device there.
     - `progress`: a progress bar (tqdm) over the chunks.
+    - `runs`: only these run indices (any subset, any order; the table holds their rows,
+        sorted by run), in chunks of `chunk`.
+    - `parts`: a folder where each chunk's rows are written as one Parquet part as soon
+        as the chunk finishes, with a manifest of the chunks done (`visjax.studies`'s parts
+        format): an interrupted sweep keeps every finished chunk. A folder that already
+        holds parts of this sweep is refused unless `resume=True`, which skips the chunks
+        done; one holding another sweep's parts is refused.
+    - `shard`: `(i, n)`: only the chunks `c` with `c % n == i`, one of `n` disjoint slices
+        (a job array's task); the parts of all slices merge into the whole table
+        (`merge_parts`, `visjax merge`).
+    - `executor`: where the chunks run: `None` (this process, in order) or an executor
+        such as `RayExecutor` (chunks as tasks on a Ray cluster, retried if lost; the
+        parts are written here as results arrive). Not with `mesh`.
+    - `max_memory`: bytes one chunk may need (its compiled program's arguments, outputs
+        and temporaries, from XLA's memory analysis: one more lowering of the chunk), or
+        `"available"` for 80% of the memory available now; a larger chunk is refused
+        before any run, naming a chunk that fits. Default `None`: not checked.
+    - `log`: `line -> None` for what the sweep says as it goes (the memory of a chunk,
+        the time estimate after the first chunks); default silent.
+    - `stop`: `() -> bool`, asked after every chunk: `True` ends the sweep there by raising
+        `KeyboardInterrupt`, every finished chunk written (a time limit, a signal handler
+        that asks for a clean stop).
 
     **Returns:** a `pandas.DataFrame`, one row per run (point-major, the seed fastest):
     `run`, `point` (the parameter point's index), the parameters (leaf names joined by `.`,
     components as `name[i]`), `seed`, `result` (the result code's name), `failed_sample`
     (-1 if none) and the metrics. A failed run keeps its row and its code; its metrics are
     NaN, never its frozen state's numbers. A run that reports success but whose metric is
-    not finite is marked `nonfinite_output`.
+    not finite is marked `nonfinite_output`. With `shard`, the rows of the shard's runs.
     """
-    import pandas as pd
-
+    from ._parts import Parts
     from ._problem import AbstractProblem, check_values, runner
 
+    identity_source, info = None, {}
     if isinstance(factory, AbstractProblem):
+        info = {"metric": factory.metric, "method": factory.check_method(method)}
         if metrics is not None:
             raise ValueError("with a problem, `sweep` takes its metrics from the problem.")
         if not isinstance(params, Mapping):
             raise ValueError("`params` of a problem's sweep must be a dict name -> values.")
         check_values(factory, params, "sweep")
         factory, metrics = runner(factory, method, fixed)
+        identity_source = repr(factory._key)
     elif metrics is None:
         raise ValueError("`sweep(factory, params, keys, metrics=...)`: `metrics` is needed.")
     elif method is not None or fixed is not None:
@@ -207,54 +248,230 @@ def sweep(
     n_seeds = key_data.shape[0]
     if n_points < 1 or n_seeds < 1:
         raise ValueError(f"nothing to run: {n_points} parameter points and {n_seeds} seeds.")
-    if chunk < 1:
-        raise ValueError(f"`chunk` must be at least 1; got {chunk}.")
+    if isinstance(chunk, bool) or not isinstance(chunk, int | np.integer) or chunk < 1:
+        raise ValueError(f"`chunk` must be a positive int; got {chunk!r}.")
+    if executor is not None and mesh is not None:
+        raise ValueError("`executor` runs whole chunks on its workers: not with `mesh`.")
     devices = 1 if mesh is None else mesh.devices.size
+    n_runs = n_points * n_seeds
     # a small sweep runs in one chunk of the next power of two (so that sweeps of similar
     # sizes share one compilation), a large one in chunks of `chunk`
-    small = 1 << max(0, math.ceil(math.log2(n_points * n_seeds)))
-    chunk = devices * math.ceil(min(chunk, small) / devices)
-    n_runs = n_points * n_seeds
-    n_chunks = math.ceil(n_runs / chunk)
+    small = 1 << max(0, math.ceil(math.log2(n_runs)))
+    chunk = devices * math.ceil(min(int(chunk), small) / devices)
+
+    if runs is not None:
+        if parts is not None or shard is not None:
+            raise ValueError("`runs` (a subset of runs) is not for `parts` or `shard`.")
+        wanted = np.unique(np.asarray(runs, dtype=np.int64).ravel())
+        if wanted.size == 0 or wanted[0] < 0 or wanted[-1] >= n_runs:
+            raise ValueError(f"`runs` must be run indices in [0, {n_runs}); got {runs!r}.")
+        plan = [(c, wanted[c * chunk : (c + 1) * chunk]) for c in range(-(-wanted.size // chunk))]
+    else:
+        if shard is not None:
+            i, n = (int(x) for x in shard)
+            if not (n >= 1 and 0 <= i < n):
+                raise ValueError(f"`shard` must be (i, n) with 0 <= i < n; got {shard!r}.")
+            shard = (i, n)
+        n_chunks = math.ceil(n_runs / chunk)
+        ids = range(n_chunks) if shard is None else range(shard[0], n_chunks, shard[1])
+        plan = [(c, np.arange(c * chunk, min((c + 1) * chunk, n_runs))) for c in ids]
+
+    store = None
+    done: set[int] = set()
+    if parts is not None:
+        identity = _identity(identity_source or _qualname(factory), leaves, key_data, chunk)
+        info.update(n_points=int(n_points), n_seeds=int(n_seeds))
+        store = Parts(parts, identity, n_runs, chunk, shard=shard, info=info)
+        done = store.open(resume=resume)
+    elif resume:
+        raise ValueError("`resume=True` needs the `parts` folder of the sweep to resume.")
 
     if chunk > 1:
         warn_if_hang_prone()
     compiled = _compiled(factory, metrics, treedef, mesh)
-    if mesh is None:
+    seed_values = np.asarray(keys) if not _is_key_array(keys) else np.arange(n_seeds)
+    todo = [(c, idx) for c, idx in plan if c not in done]
+    if todo and executor is None and max_memory is not None:
+        _check_memory(compiled, leaves, key_data, chunk, max_memory, log)
 
-        def place(x):
-            return x
-    else:
-        split = _sharding(mesh)
+    def frame(idx, out):
+        values, codes, failed = jax.tree_util.tree_map(lambda x: np.asarray(x)[: idx.size], out)
+        return _frame(idx, leaves_with_path, leaves, n_seeds, seed_values, values, codes, failed)
 
-        def place(x):  # each process supplies its own devices' shards (multi-process safe)
-            return jax.make_array_from_callback(x.shape, split, lambda index: x[index])
-
+    frames = {c: store.read(c) for c, _ in plan if c in done}
     from tqdm import tqdm
 
-    collected = []
     show = progress and jax.process_index() == 0
-    for c in tqdm(range(n_chunks), desc="sweep", unit="chunk", disable=not show):
-        runs = np.minimum(np.arange(c * chunk, (c + 1) * chunk), n_runs - 1)
-        point_leaves = [place(leaf[runs // n_seeds]) for leaf in leaves]
-        kd = place(key_data[runs % n_seeds])
-        out = compiled(point_leaves, kd)
-        collected.append(_gather(out, mesh is not None))
-    values, codes, failed = jax.tree_util.tree_map(
-        lambda *xs: np.concatenate(xs)[:n_runs], *collected
-    )
-    runs = np.arange(n_runs)
-    table = {"run": runs, "point": runs // n_seeds}
+    bar = tqdm(total=len(plan), initial=len(frames), desc="sweep", unit="chunk", disable=not show)
+    timer = _Timer(len(todo), chunk, log)
+    if executor is None:
+        place = _placer(mesh)
+
+        def finished():  # this process, in order
+            for c, idx in todo:
+                padded = np.concatenate([idx, np.full(chunk - idx.size, idx[-1])])
+                point_leaves = [place(leaf[padded // n_seeds]) for leaf in leaves]
+                out = compiled(point_leaves, place(key_data[padded % n_seeds]))
+                yield c, _gather(out, mesh is not None)
+    else:
+        task = _ChunkTask(factory, metrics, treedef, leaves, key_data, chunk)
+
+        def finished():  # the executor's workers, as they finish
+            return executor.map_chunks(task, todo)
+
+    indices = dict(todo)
+    try:
+        for c, out in finished():
+            frames[c] = frame(indices[c], out)
+            if store is not None:
+                store.write(c, frames[c])
+            bar.update(1)
+            timer.tick()
+            if stop is not None and stop():
+                raise KeyboardInterrupt("the sweep was asked to stop")
+    finally:
+        bar.close()
+    import pandas as pd
+
+    table = pd.concat([frames[c] for c, _ in plan], ignore_index=True)
+    return table.sort_values("run", kind="stable").reset_index(drop=True)
+
+
+def _qualname(factory) -> str:
+    f = getattr(factory, "__wrapped__", factory)
+    return f"{getattr(f, '__module__', '')}.{getattr(f, '__qualname__', type(f).__name__)}"
+
+
+def _identity(source: str, leaves, key_data, chunk) -> str:
+    """A digest of what a sweep computes: its problem (or function), the parameter
+    points, the seeds and the chunk size (the parts of two sweeps with equal digests are
+    interchangeable)."""
+    import hashlib
+
+    h = hashlib.sha256(source.encode())
+    for a in [*leaves, key_data]:
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(a.tobytes())
+    h.update(f"chunk={chunk}".encode())
+    return h.hexdigest()
+
+
+def _frame(idx, leaves_with_path, leaves, n_seeds, seed_values, values, codes, failed):
+    """The table rows of the runs `idx` from their computed values."""
+    import pandas as pd
+
+    table = {"run": idx.astype(np.int64), "point": (idx // n_seeds).astype(np.int64)}
     for (path, _), leaf in zip(leaves_with_path, leaves):
-        table.update(_columns(_leaf_name(path) or "param", leaf[runs // n_seeds]))
-    seed_values = np.asarray(keys) if not _is_key_array(keys) else np.arange(n_seeds)
-    table["seed"] = seed_values[runs % n_seeds]
+        table.update(_columns(_leaf_name(path) or "param", leaf[idx // n_seeds]))
+    table["seed"] = seed_values[idx % n_seeds]
     names = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
     table["result"] = [names[int(v)] for v in codes]
     table["failed_sample"] = failed
     for name, v in values.items():
         table.update(_columns(name, v))
     return pd.DataFrame(table)
+
+
+def _placer(mesh):
+    if mesh is None:
+        return lambda x: x
+    split = _sharding(mesh)
+    # each process supplies its own devices' shards (multi-process safe)
+    return lambda x: jax.make_array_from_callback(x.shape, split, lambda index: x[index])
+
+
+class _ChunkTask:
+    """One chunk of a sweep as a picklable task for an executor's workers: `task(idx)`
+    computes the runs `idx` (padded to the chunk) in the worker's own process, compiling
+    once per worker."""
+
+    def __init__(self, factory, metrics, treedef, leaves, key_data, chunk):
+        self.factory, self.metrics, self.treedef = factory, metrics, treedef
+        self.leaves, self.key_data, self.chunk = leaves, key_data, chunk
+        self.x64 = bool(jax.config.jax_enable_x64)  # the worker computes as the caller
+
+    def __call__(self, idx):
+        n_seeds = self.key_data.shape[0]
+        padded = np.concatenate([idx, np.full(self.chunk - idx.size, idx[-1])])
+        compiled = _compiled(self.factory, self.metrics, self.treedef, None)
+        out = compiled(
+            [leaf[padded // n_seeds] for leaf in self.leaves], self.key_data[padded % n_seeds]
+        )
+        return jax.tree_util.tree_map(np.asarray, out)
+
+
+def _available_memory() -> float | None:
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def chunk_memory(compiled, leaves, key_data, chunk) -> int | None:
+    """Bytes one chunk's compiled program needs (arguments, outputs, temporaries), from
+    XLA's memory analysis; `None` where the backend does not report it."""
+    n_seeds = key_data.shape[0]
+    idx = np.zeros(chunk, dtype=np.int64)
+    args = ([leaf[idx // n_seeds] for leaf in leaves], key_data[idx % n_seeds])
+    try:
+        stats = compiled.lower(*args).compile().memory_analysis()
+    except Exception:  # a backend without the analysis: no estimate, no refusal
+        return None
+    if stats is None:
+        return None
+    return int(
+        stats.argument_size_in_bytes
+        + stats.output_size_in_bytes
+        + stats.temp_size_in_bytes
+        - getattr(stats, "alias_size_in_bytes", 0)
+    )
+
+
+def _check_memory(compiled, leaves, key_data, chunk, max_memory, log):
+    need = chunk_memory(compiled, leaves, key_data, chunk)
+    if need is None:
+        return
+    limit = max_memory
+    if isinstance(limit, str):
+        if limit != "available":
+            raise ValueError(f'`max_memory` must be bytes or "available"; got {limit!r}.')
+        available = _available_memory()
+        limit = None if available is None else 0.8 * available
+    if log is not None:
+        log(f"memory per chunk of {chunk} runs: {need / 2**20:.1f} MiB")
+    if limit is not None and need > limit:
+        fits = max(1, int(chunk * limit / need))
+        raise ValueError(
+            f"a chunk of {chunk} runs needs {need / 2**20:.0f} MiB, more than the "
+            f"{limit / 2**20:.0f} MiB available to it: use a chunk of at most {fits} runs "
+            "(`--chunk`)."
+        )
+
+
+class _Timer:
+    """The time estimate, said after the first two chunks (the first one compiles)."""
+
+    def __init__(self, n_chunks, chunk, log):
+        self.n, self.chunk, self.log = n_chunks, chunk, log
+        self.count, self.start = 0, time.perf_counter()
+        self.first = None
+
+    def tick(self):
+        self.count += 1
+        if self.log is None:
+            return
+        now = time.perf_counter()
+        if self.count == 1:
+            self.first = now
+            self.log(f"first chunk (with compilation): {now - self.start:.1f} s")
+        elif self.count == 2 and self.n > 2:
+            per = now - self.first
+            self.log(
+                f"{per:.2f} s per chunk of {self.chunk} runs: about {per * (self.n - 2):.0f} s "
+                f"for the other {self.n - 2} chunks"
+            )
+        self.last = now
 
 
 def _sharding(mesh):

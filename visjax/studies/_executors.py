@@ -1,0 +1,91 @@
+"""Where a sweep's chunks run: this process (`sweep`'s default) or the workers of a Ray
+cluster (`RayExecutor`). An executor's `map_chunks(task, todo)` yields `(chunk, outputs)`
+as chunks finish, in any order; `sweep` writes each as a part as it arrives."""
+
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+
+class RayExecutor:
+    """The chunks of a sweep as Ray tasks: each task computes one chunk in a worker process
+    (which compiles the chunk's program once and reuses it for its later chunks), a task
+    lost with its worker is retried (`max_retries`), and the results stream back to the
+    calling process as they finish, where `sweep` writes them as parts.
+
+    **Arguments:** `address`: a running cluster's address (`"auto"` for the one this
+    machine belongs to), or `None` for a local Ray instance started here (and stopped by
+    `shutdown`); `num_cpus`: the local instance's CPUs (default: all); `max_retries`: the
+    retries of a task whose worker died; `cpus_per_task`: the CPUs a chunk reserves (JAX
+    uses the cores it is given; 1 runs one chunk per CPU).
+
+    Ray is an optional dependency (`pip install visjax[ray]`), imported when an executor is
+    made. A chunk's task carries the problem and the parameter points (pickled once per
+    chunk by Ray: keep chunks large against that).
+    """
+
+    def __init__(
+        self,
+        address: str | None = None,
+        *,
+        num_cpus: int | None = None,
+        max_retries: int = 3,
+        cpus_per_task: float = 1.0,
+    ):
+        try:
+            import ray
+        except ImportError:
+            raise ImportError(
+                "the Ray executor needs Ray: pip install 'visjax[ray]' (or ray[default])"
+            ) from None
+        self.ray = ray
+        self.max_retries = int(max_retries)
+        self.cpus_per_task = float(cpus_per_task)
+        self.started_here = False
+        if not ray.is_initialized():
+            import os
+
+            # the workers run XLA with the caller's options (`apply_xla_cpu_workarounds`)
+            env = {"XLA_FLAGS": os.environ["XLA_FLAGS"]} if "XLA_FLAGS" in os.environ else {}
+            kwargs: dict[str, Any] = {
+                "include_dashboard": False,
+                "log_to_driver": False,
+                "runtime_env": {"env_vars": env},
+            }
+            if address is None:
+                if num_cpus is not None:
+                    kwargs["num_cpus"] = int(num_cpus)
+                ray.init(**kwargs)
+                self.started_here = True
+            else:
+                ray.init(address=address, **kwargs)
+
+    def map_chunks(self, task, todo: Sequence) -> Iterator[tuple[int, Any]]:
+        """Run `task(idx)` for every `(chunk, idx)` of `todo` on the cluster; yield
+        `(chunk, outputs)` as each finishes. A task that fails for good raises here."""
+        ray = self.ray
+        remote = ray.remote(_run_task).options(
+            num_cpus=self.cpus_per_task, max_retries=self.max_retries, retry_exceptions=False
+        )
+        shared = ray.put(task)
+        pending = {remote.remote(shared, idx): c for c, idx in todo}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            for ref in ready:
+                c = pending.pop(ref)
+                yield c, ray.get(ref)
+
+    def shutdown(self) -> None:
+        """Stop the local Ray instance this executor started (nothing for a cluster)."""
+        if self.started_here and self.ray.is_initialized():
+            self.ray.shutdown()
+            self.started_here = False
+
+
+def _run_task(task, idx):
+    """A chunk on a Ray worker: the worker process enables 64-bit JAX like the caller
+    (its own process: no global state of the caller's is changed)."""
+    import jax
+
+    if task.x64 and not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+    return task(idx)

@@ -1,0 +1,202 @@
+"""A sweep's results on disk as they finish: one Parquet part per chunk and a manifest of
+what is done, so that an interrupted sweep loses at most the chunk in flight, a resumed one
+skips what is done, and the slices of a sweep run on several machines (`--shard i/N`)
+merge into one table.
+
+The folder holds `manifest.json` (the sweep's identity, its size and chunking, the shard,
+and the chunks done) and `part-<chunk>.parquet` (the rows of one chunk). Every file is
+written to a temporary name and renamed into place, so a part is either whole or absent,
+and the manifest never names a part that is not on disk.
+"""
+
+import json
+import os
+import tempfile
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+MANIFEST = "manifest.json"
+_VERSION = 1
+
+
+class PartsError(ValueError):
+    """A parts folder that cannot be used as asked (another sweep's, missing or duplicated
+    runs): the message says what and why."""
+
+
+def part_name(chunk: int) -> str:
+    return f"part-{chunk:07d}.parquet"
+
+
+def _atomic_write(path: Path, write) -> None:
+    """`write(tmp_path)` then rename onto `path` (same folder: an atomic replace)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_json(path: Path, data: dict) -> None:
+    def write(tmp):
+        with open(tmp, "w") as f:
+            json.dump(data, f, indent=1, sort_keys=True)
+
+    _atomic_write(Path(path), write)
+
+
+class Parts:
+    """The parts folder of one sweep (or one shard of it).
+
+    `identity`: a digest of what the sweep computes (the problem or function, the method
+    and fixed parameters, the parameter points, the seeds, the chunk size): parts of
+    different sweeps never mix. `n_runs`, `chunk`: the runs and the chunk size (chunk `c`
+    holds runs `c * chunk` to `(c + 1) * chunk - 1`). `shard`: `(i, n)` or `None`.
+    """
+
+    def __init__(self, folder, identity: str, n_runs: int, chunk: int, shard=None, info=None):
+        self.folder = Path(folder)
+        self.identity, self.n_runs, self.chunk = identity, int(n_runs), int(chunk)
+        self.shard = None if shard is None else (int(shard[0]), int(shard[1]))
+        self.info = dict(info or {})
+        self.done: set[int] = set()
+
+    @property
+    def n_chunks(self) -> int:
+        return -(-self.n_runs // self.chunk)
+
+    def chunks(self) -> list[int]:
+        """This sweep's (or shard's) chunks: all, or every `n`-th from `i`."""
+        if self.shard is None:
+            return list(range(self.n_chunks))
+        i, n = self.shard
+        return list(range(i, self.n_chunks, n))
+
+    def _manifest(self) -> dict:
+        return {
+            "version": _VERSION,
+            "identity": self.identity,
+            "n_runs": self.n_runs,
+            "chunk": self.chunk,
+            "n_chunks": self.n_chunks,
+            "shard": None if self.shard is None else list(self.shard),
+            "done": sorted(self.done),
+            "info": self.info,
+        }
+
+    def open(self, *, resume: bool) -> set[int]:
+        """Create the folder, or reopen it with `resume=True`. **Returns:** the chunks
+        already done. **Raises:** `PartsError` for a folder that holds another sweep's
+        parts, or any parts without `resume`."""
+        path = self.folder / MANIFEST
+        if path.exists():
+            old = json.loads(path.read_text())
+            if old.get("identity") != self.identity or old.get("chunk") != self.chunk:
+                raise PartsError(
+                    f"{self.folder} holds the parts of a different sweep (other parameter "
+                    "points, seeds, problem or chunk size); choose another folder, or remove "
+                    "it to start over."
+                )
+            if (old.get("shard") or None) != (None if self.shard is None else list(self.shard)):
+                raise PartsError(
+                    f"{self.folder} holds the parts of shard {old.get('shard')}, not {self.shard}."
+                )
+            done = {c for c in old.get("done", []) if (self.folder / part_name(c)).exists()}
+            if done and not resume:
+                raise PartsError(
+                    f"{self.folder} already holds {len(done)} finished chunk(s) of this "
+                    "sweep: resume it (`resume=True`, `--resume`) or remove it to start over."
+                )
+            self.done = done if resume else set()
+        else:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        write_json(path, self._manifest())
+        return set(self.done)
+
+    def write(self, chunk: int, frame) -> None:
+        """Write chunk `chunk`'s rows (a DataFrame) as its part, then mark it done."""
+        _atomic_write(
+            self.folder / part_name(chunk), lambda tmp: frame.to_parquet(tmp, index=False)
+        )
+        self.done.add(int(chunk))
+        write_json(self.folder / MANIFEST, self._manifest())
+
+    def read(self, chunk: int):
+        import pandas as pd
+
+        return pd.read_parquet(self.folder / part_name(chunk))
+
+    def runs_done(self) -> int:
+        return sum(min(self.chunk, self.n_runs - c * self.chunk) for c in self.done)
+
+
+def read_manifest(folder) -> dict:
+    path = Path(folder) / MANIFEST
+    if not path.exists():
+        raise PartsError(f"{folder}: no {MANIFEST} (not a sweep's parts folder).")
+    return json.loads(path.read_text())
+
+
+def find_parts(paths: Iterable) -> list[Path]:
+    """The parts folders (folders with a manifest) in or under `paths`."""
+    found = []
+    for p in paths:
+        p = Path(p)
+        if not p.exists():
+            raise PartsError(f"{p}: no such folder.")
+        if (p / MANIFEST).exists():
+            found.append(p)
+        found.extend(sorted(m.parent for m in p.rglob(MANIFEST) if m.parent != p))
+    if not found:
+        raise PartsError(f"no sweep parts (no {MANIFEST}) in {[str(p) for p in paths]}.")
+    return sorted(set(found))
+
+
+def merge_parts(folders: Sequence) -> tuple:
+    """One table from the parts of one sweep spread over `folders` (its shards, or an
+    interrupted run and its resumption). **Returns:** `(table, manifest)`, the rows sorted
+    by run. **Raises:** `PartsError` for parts of different sweeps, a run found twice, or
+    runs missing (naming the chunks)."""
+    import pandas as pd
+
+    manifests = [(f, read_manifest(f)) for f in folders]
+    first = manifests[0][1]
+    for f, m in manifests[1:]:
+        if (m["identity"], m["chunk"], m["n_runs"]) != (
+            first["identity"],
+            first["chunk"],
+            first["n_runs"],
+        ):
+            raise PartsError(
+                f"{f} holds the parts of a different sweep than {manifests[0][0]}: they do "
+                "not merge."
+            )
+    owner: dict[int, Path] = {}
+    frames = []
+    for f, m in manifests:
+        for c in m["done"]:
+            if not (Path(f) / part_name(c)).exists():
+                continue
+            if c in owner:
+                raise PartsError(
+                    f"chunk {c} (runs {c * first['chunk']} to "
+                    f"{min((c + 1) * first['chunk'], first['n_runs']) - 1}) is in both "
+                    f"{owner[c]} and {f}: a run found twice."
+                )
+            owner[c] = Path(f)
+            frames.append(pd.read_parquet(Path(f) / part_name(c)))
+    missing = sorted(set(range(first["n_chunks"])) - set(owner))
+    if missing:
+        shown = ", ".join(map(str, missing[:10])) + (" ..." if len(missing) > 10 else "")
+        raise PartsError(
+            f"{len(missing)} of {first['n_chunks']} chunks are missing (chunks {shown}): "
+            "run the shards that hold them (or resume the interrupted one) before merging."
+        )
+    table = pd.concat(frames, ignore_index=True).sort_values("run", kind="stable")
+    table = table.reset_index(drop=True)
+    if len(table) != first["n_runs"] or table["run"].duplicated().any():
+        raise PartsError(f"the parts hold {len(table)} rows for {first['n_runs']} runs.")
+    return table, first
