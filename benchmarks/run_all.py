@@ -42,6 +42,11 @@ BENCHMARKS = {
         ["--duration", "1", "--batch", "8"],
     ),
     "compile_times": ("compile_times.py", [], []),
+    "sweep_scaling": (
+        "sweep_scaling.py",
+        [],
+        ["--runs", "32", "--chunk", "8", "--duration", "0.1", "--repeats", "1"],
+    ),
 }
 
 

@@ -519,11 +519,11 @@ def _sweeps(
         if not p.scored:
             raise ValueError(f"{p.title}: a sweep needs the truth (the data file has none)")
         folder = _folder(out, tag)
-        durable = {"shard": job, "executor": executor, "log": say}
+        durable = {"shard": job, "executor": executor, "log": say, "max_memory": "available"}
         if folder is not None:
             parts = _parts_folder(folder, job)
             _refuse_finished(folder, parts, resume, force)
-            durable.update(parts=parts, resume=resume, max_memory="available")
+            durable.update(parts=parts, resume=resume)
         try:
             with _interruptible() as signals:
                 spec, table, summary, best = _one_sweep(

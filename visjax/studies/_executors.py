@@ -19,8 +19,8 @@ class RayExecutor:
     uses the cores it is given; 1 runs one chunk per CPU).
 
     Ray is an optional dependency (`pip install visjax[ray]`), imported when an executor is
-    made. A chunk's task carries the problem and the parameter points (pickled once per
-    chunk by Ray: keep chunks large against that).
+    made. The problem and the parameter points are sent once (`ray.put`); the workers
+    compute in the caller's 64-bit mode of the moment the executor is made.
     """
 
     def __init__(
@@ -41,11 +41,18 @@ class RayExecutor:
         self.max_retries = int(max_retries)
         self.cpus_per_task = float(cpus_per_task)
         self.started_here = False
+        import jax
+
+        self.x64 = bool(jax.config.jax_enable_x64)
         if not ray.is_initialized():
             import os
 
+            import jax
+
             # the workers run XLA with the caller's options (`apply_xla_cpu_workarounds`)
+            # and JAX's 64-bit mode as the caller (set before a task's arrays are unpickled)
             env = {"XLA_FLAGS": os.environ["XLA_FLAGS"]} if "XLA_FLAGS" in os.environ else {}
+            env["JAX_ENABLE_X64"] = "1" if jax.config.jax_enable_x64 else "0"
             kwargs: dict[str, Any] = {
                 "include_dashboard": False,
                 "log_to_driver": False,
@@ -63,6 +70,12 @@ class RayExecutor:
         """Run `task(idx)` for every `(chunk, idx)` of `todo` on the cluster; yield
         `(chunk, outputs)` as each finishes. A task that fails for good raises here."""
         ray = self.ray
+        if task.x64 != self.x64:
+            raise ValueError(
+                "JAX's 64-bit mode changed since the Ray executor was made (its workers "
+                "compute in the mode of that moment): make the executor after "
+                "`jax.config.update('jax_enable_x64', ...)`."
+            )
         remote = ray.remote(_run_task).options(
             num_cpus=self.cpus_per_task, max_retries=self.max_retries, retry_exceptions=False
         )
@@ -82,10 +95,5 @@ class RayExecutor:
 
 
 def _run_task(task, idx):
-    """A chunk on a Ray worker: the worker process enables 64-bit JAX like the caller
-    (its own process: no global state of the caller's is changed)."""
-    import jax
-
-    if task.x64 and not jax.config.jax_enable_x64:
-        jax.config.update("jax_enable_x64", True)
+    """A chunk on a Ray worker (whose 64-bit mode is the caller's, from its environment)."""
     return task(idx)
