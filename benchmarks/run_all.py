@@ -42,6 +42,7 @@ BENCHMARKS = {
         ["--duration", "1", "--batch", "8"],
     ),
     "compile_times": ("compile_times.py", [], []),
+    "gain_sweep": ("gain_sweep.py", [], ["--batches", "1", "64", "--duration", "0.2"]),
     "sweep_scaling": (
         "sweep_scaling.py",
         [],

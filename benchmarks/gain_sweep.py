@@ -1,0 +1,116 @@
+"""The batched gain-tuning case: the velocity estimator of Chitrakaran et al. run by
+`visjax.estimators.run` on one shared, prepared measurement stream (the section-6
+simulation at 1 kHz, no per-run noise), `jax.vmap` over a batch of gains (K of eq. (63)
+times log-normal factors), the windowed RMS reduced in the loop. Prints JSON.
+
+Reported per batch: ns per trajectory-step after compilation (the median of `--repeats`
+calls), its ratio against batch 1 measured in the same run, and the kernels of one loop
+step: the operations of the compiled while loop's body that run as kernels of their own
+on a CPU (fusions, copies, stand-alone arithmetic), each a launch per step whatever the
+batch. The target of issue 29: <= 10 ns per trajectory-step at batch 1,024.
+
+    python benchmarks/gain_sweep.py [--batches 1 256 1024 16384] [--duration 1.0]
+"""
+
+import argparse
+import json
+import platform
+import re
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+
+import visjax
+from visjax.estimators import (
+    SaveAt,
+    VelocityEstimator,
+    WindowRMS,
+    fixed_camera,
+    run,
+    velocity_stream,
+)
+from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
+
+# the operations of a compiled program that run as kernels of their own on a CPU
+KERNEL_OPS = {"fusion", "copy", "concatenate", "custom-call", "dynamic-slice", "reduce",
+              "dynamic-update-slice", "transpose", "select", "add", "multiply", "divide",
+              "subtract", "sqrt", "conditional", "while", "sort", "gather", "scatter"}  # fmt: skip
+
+
+def loop_kernels(compiled) -> int:
+    """The kernels of the body of the compiled program's (first) while loop."""
+    text = compiled.as_text()
+    bodies = re.findall(r"while\(.*?\), condition=%?[\w.\-]+, body=%?([\w.\-]+)", text)
+    if not bodies:
+        return -1
+    m = re.search(r"\n%?" + re.escape(bodies[0]) + r" .*?\n}\n", text, re.S)
+    ops = re.findall(r"^\s*\S+ = (?:\([^)]*\)|\S+) ([\w-]+)\(", m.group(0), re.MULTILINE)
+    return sum(op in KERNEL_OPS for op in ops)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--batches", type=int, nargs="+", default=[1, 256, 1024, 16384])
+    parser.add_argument("--duration", type=float, default=1.0, help="seconds at 1 kHz")
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    visjax.apply_xla_cpu_workarounds()
+    jax.config.update("jax_enable_x64", True)
+
+    sc = section6_scenario(args.duration, 1000.0)
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    prepared = velocity_stream(sc.ts, sc.pixels, camera).measured()
+    prepared = type(prepared)(ts=prepared.ts, ys=prepared.ys, truth=sc.velocity)
+    steps = int(prepared.ts.shape[0])
+    reducer = WindowRMS(0.5 * args.duration, args.duration + 1e-9, field="v_hat")
+
+    def loop(K):
+        sol = run(
+            VelocityEstimator(K=K, rho=RHO_EQ63), prepared, saveat=SaveAt(outputs=False),
+            reducer=reducer, throw=False,
+        )  # fmt: skip
+        return sol.summary.rms
+
+    study = jax.jit(jax.vmap(loop))
+    rows = []
+    for batch in args.batches:
+        factors = jnp.exp(0.1 * jax.random.normal(jax.random.key(1), (batch, 6)))
+        Ks = jnp.asarray(K_EQ63) * factors
+        compiled = study.lower(Ks).compile()
+        jax.block_until_ready(compiled(Ks))
+        times = []
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            jax.block_until_ready(compiled(Ks))
+            times.append(time.perf_counter() - t0)
+        ns = 1e9 * statistics.median(times) / (batch * steps)
+        rows.append(
+            {
+                "batch": batch,
+                "ns_per_trajectory_step": ns,
+                "kernels_per_step": loop_kernels(compiled),
+            }
+        )
+    base = rows[0]["ns_per_trajectory_step"]
+    for r in rows:
+        r["ratio_to_first_batch"] = base / r["ns_per_trajectory_step"]
+    print(
+        json.dumps(
+            {
+                "benchmark": "gain_sweep_shared_stream_velocity",
+                "machine": platform.machine(),
+                "jax": jax.__version__,
+                "dtype": "float64",
+                "steps_per_trajectory": steps,
+                "batches": rows,
+                "target": {"ns_per_trajectory_step": "<= 10 at batch 1024 (issue 29)"},
+            },
+            indent=2,
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()
