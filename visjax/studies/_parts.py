@@ -98,7 +98,7 @@ class Parts:
                 raise PartsError(
                     f"{self.folder} holds the parts of a different sweep (other parameter "
                     "points, seeds, problem or chunk size); choose another folder, or remove "
-                    "it to start over."
+                    "it (`--force` on the command line) to start over."
                 )
             if (old.get("shard") or None) != (None if self.shard is None else list(self.shard)):
                 raise PartsError(
@@ -108,7 +108,8 @@ class Parts:
             if done and not resume:
                 raise PartsError(
                     f"{self.folder} already holds {len(done)} finished chunk(s) of this "
-                    "sweep: resume it (`resume=True`, `--resume`) or remove it to start over."
+                    "sweep: resume it (`resume=True`, `--resume`) or remove it (`--force`) to "
+                    "start over."
                 )
             self.done = done if resume else set()
         else:
