@@ -234,6 +234,7 @@ def test_compare_command_and_a_failed_frame(tmp_path, tracking, no_jaxtyping):
         hamel.homography_problem(noise_px=-1.0)
 
 
+@pytest.mark.slow  # the velocity problem's compile (14 s): the unit tier's budget
 def test_velocity_front_end(tracking):
     """The observer as the velocity problem's front end (1 s at 250 Hz, noise-free): its
     pixels start on the reference image and stay within 3 px of the truth (measured 1.6
