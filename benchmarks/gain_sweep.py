@@ -9,6 +9,13 @@ step: the operations of the compiled while loop's body that run as kernels of th
 on a CPU (fusions, copies, stand-alone arithmetic), each a launch per step whatever the
 batch. The target of issue 29: <= 10 ns per trajectory-step at batch 1,024.
 
+The reference measured in the same run, `bare_update`: the estimator's Euler step of
+eqs. (39)-(40) written directly, vmapped over the same gains on the same measurements,
+with nothing else (no output, no reducer, no finiteness or bound check, no freeze after a
+failure): the least work any loop over this state does per step. Its final state is
+checked against `run`'s (to 1e-9) before it is timed. `ratio_to_bare_update` is what
+`run`'s loop costs over it.
+
     python benchmarks/gain_sweep.py [--batches 1 256 1024 16384] [--duration 1.0]
 """
 
@@ -74,23 +81,60 @@ def main():
         return sol.summary.rms
 
     study = jax.jit(jax.vmap(loop))
-    rows = []
-    for batch in args.batches:
-        factors = jnp.exp(0.1 * jax.random.normal(jax.random.key(1), (batch, 6)))
-        Ks = jnp.asarray(K_EQ63) * factors
-        compiled = study.lower(Ks).compile()
+
+    e = prepared.ys.e
+    h = jnp.diff(prepared.ts)
+    rho = jnp.asarray(RHO_EQ63, e.dtype)
+
+    def bare(K):
+        def body(c, x):
+            e_hat, eta = c
+            e_k, h_k = x
+            e_tilde = e_k - e_hat  # eq. (36)
+            kappa = eta + (K + 1.0) * e_tilde  # eq. (40)
+            d_eta = (K + 1.0) * e_tilde + rho * jnp.sign(e_tilde)
+            return (e_hat + h_k * kappa, eta + h_k * d_eta), None  # eq. (39), Euler
+
+        (e_hat, eta), _ = jax.lax.scan(body, (e[0], jnp.zeros_like(e[0])), (e[:-1], h))
+        return e_hat, eta
+
+    bare_study = jax.jit(jax.vmap(bare))
+
+    def final_state(K):
+        sol = run(VelocityEstimator(K=K, rho=RHO_EQ63), prepared, saveat=SaveAt(outputs=False))
+        return sol.final_state.e_hat, sol.final_state.eta
+
+    K4 = jnp.asarray(K_EQ63) * jnp.exp(0.1 * jax.random.normal(jax.random.key(2), (4, 6)))
+    for a, b in zip(jax.vmap(final_state)(K4), bare_study(K4)):
+        gap = float(jnp.max(jnp.abs(a - b) / (1.0 + jnp.abs(a))))
+        if gap > 1e-9:
+            raise SystemExit(f"the bare update is not the estimator's step: gap {gap:.2e}")
+
+    def timed(compiled, Ks):
         jax.block_until_ready(compiled(Ks))
         times = []
         for _ in range(args.repeats):
             t0 = time.perf_counter()
             jax.block_until_ready(compiled(Ks))
             times.append(time.perf_counter() - t0)
-        ns = 1e9 * statistics.median(times) / (batch * steps)
+        return statistics.median(times)
+
+    rows = []
+    for batch in args.batches:
+        factors = jnp.exp(0.1 * jax.random.normal(jax.random.key(1), (batch, 6)))
+        Ks = jnp.asarray(K_EQ63) * factors
+        compiled = study.lower(Ks).compile()
+        bare_compiled = bare_study.lower(Ks).compile()
+        ns = 1e9 * timed(compiled, Ks) / (batch * steps)
+        ns_bare = 1e9 * timed(bare_compiled, Ks) / (batch * steps)
         rows.append(
             {
                 "batch": batch,
                 "ns_per_trajectory_step": ns,
                 "kernels_per_step": loop_kernels(compiled),
+                "bare_update_ns_per_trajectory_step": ns_bare,
+                "bare_update_kernels_per_step": loop_kernels(bare_compiled),
+                "ratio_to_bare_update": ns / ns_bare,
             }
         )
     base = rows[0]["ns_per_trajectory_step"]

@@ -187,6 +187,23 @@ def table(results: dict) -> str:
                 _met(g["rss_peak_mb"] < 4096 and g["duration_s"] >= 30 and g["batch"] >= 256),
             )
         )
+    gs = r.get("gain_sweep", {})
+    for row in gs.get("batches", []):
+        if row["batch"] == 1 or "bare_update_ns_per_trajectory_step" not in row:
+            continue
+        rows.append(
+            (
+                f"shared-stream gain sweep, velocity estimator, batch {row['batch']:,} x"
+                f" {gs['steps_per_trajectory']:,} steps (`run` with checks and a windowed RMS)",
+                f"{_fmt(row['ns_per_trajectory_step'])} ns per trajectory-step,"
+                f" {row['kernels_per_step']} kernels per step",
+                f"the bare Euler update alone {_fmt(row['bare_update_ns_per_trajectory_step'])}"
+                f" ns, {row['bare_update_kernels_per_step']} kernels",
+                f"{_fmt(row['ratio_to_bare_update'])}x the bare update",
+                "<= 10 ns at batch 1,024" if row["batch"] == 1024 else "(reported)",
+                _met(row["ns_per_trajectory_step"] <= 10) if row["batch"] == 1024 else "-",
+            )
+        )
     c = r.get("compile_times", {})
     for row in c.get("results", []):
         rows.append(
