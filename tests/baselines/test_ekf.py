@@ -138,3 +138,81 @@ def test_bad_shapes(data, no_jaxtyping):
         extended_kalman_filter(model, ts, zs, us, x0, P0[:3])
     with pytest.raises(ValueError, match="substeps"):
         extended_kalman_filter(model, ts, zs, us, x0, P0, substeps=0)
+
+
+# ---------------------------------------------------------------------------------------
+# The outlier gate
+
+
+def test_chi2_quantile_against_scipy():
+    from scipy.stats import chi2
+
+    from visjax.baselines._ekf import chi2_quantile
+
+    for dof in (1, 2, 3, 6):
+        for p in (0.5, 0.9, 0.99, 0.999, 0.999999):
+            got = float(chi2_quantile(jnp.asarray(p), dof))
+            np.testing.assert_allclose(got, chi2.ppf(p, dof), rtol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def tracked():
+    """The linear model simulated (its own noise), then 4 samples replaced by outliers 40
+    standard deviations off."""
+    rng = np.random.default_rng(11)
+    n, dt, q, r = 60, 0.1, 0.5, 0.01
+    ts = dt * np.arange(n)
+    us = rng.normal(size=(n, 2))
+    x = np.array([0.0, 0.0, 1.0, -1.0])
+    zs = []
+    for k in range(n):
+        zs.append(x[:2] + np.sqrt(r) * rng.normal(size=2))
+        G = np.concatenate([0.5 * dt**2 * np.eye(2), dt * np.eye(2)])
+        F = np.block([[np.eye(2), dt * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
+        x = F @ x + G @ (us[k] + np.sqrt(q) * rng.normal(size=2))
+    zs = np.array(zs)
+    bad = np.array([7, 19, 33, 50])
+    outliers = zs.copy()
+    outliers[bad] += 40.0 * np.sqrt(r) * np.array([1.0, -0.5])
+    x0, P0 = np.array([0.0, 0.0, 1.0, -1.0]), np.eye(4)
+    return ts, zs, outliers, us, x0, P0, Linear(q=q, r=r), bad
+
+
+def test_the_gate_rejects_exactly_the_outliers(tracked):
+    ts, zs, outliers, us, x0, P0, model, bad = tracked
+    missing = outliers.copy()
+    missing[bad] = np.nan
+    ekf = eqx.filter_jit(extended_kalman_filter)
+    gated = ekf(model, ts, outliers, us, x0, P0, gate=0.9999)
+    oracle = ekf(model, ts, missing, us, x0, P0)  # the outliers known and left out
+    plain = ekf(model, ts, outliers, us, x0, P0)
+    assert gated.result == RESULTS.successful
+    # the gate finds the 4 outliers and nothing else: the filter that was told
+    np.testing.assert_allclose(gated.outputs.x, oracle.outputs.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(gated.outputs.P, oracle.outputs.P, rtol=1e-12, atol=1e-14)
+    np.testing.assert_array_equal(gated.outputs.rejected, np.cumsum(np.isin(np.arange(60), bad)))
+    assert float(oracle.outputs.rejected[-1]) == 0.0
+    # without the gate the outliers pull the estimate off: worst position error vs the gated
+    clean = ekf(model, ts, zs, us, x0, P0)
+    err = lambda s: np.max(np.abs(np.asarray(s.outputs.x[:, :2] - clean.outputs.x[:, :2])))  # noqa: E731
+    assert err(plain) > 10 * err(gated)
+
+
+def test_the_gate_under_vmap_and_its_settings(tracked, no_jaxtyping):
+    ts, zs, outliers, us, x0, P0, model, bad = tracked
+
+    def final(p):
+        sol = extended_kalman_filter(model, ts, outliers, us, x0, P0, gate=p, throw=False)
+        return sol.outputs.rejected[-1], sol.result
+
+    rejected, results = jax.jit(jax.vmap(final))(jnp.array([0.9999, 0.5, 0.0]))
+    codes = np.asarray(results._value)
+    # a gate at the median rejects about half of the 60 samples
+    assert float(rejected[0]) == 4.0 and 15 < float(rejected[1]) < 45
+    assert codes[0] == codes[1] == RESULTS.successful._value
+    # a probability of 0 is not a gate: a result code under jit, not garbage
+    assert codes[2] == RESULTS.invalid_settings._value
+    with pytest.raises(ValueError, match="`gate` must be a probability"):
+        extended_kalman_filter(model, ts, outliers, us, x0, P0, gate=1.5)
+    with pytest.raises(ValueError, match="`gate_size` 3 must divide"):
+        extended_kalman_filter(model, ts, outliers, us, x0, P0, gate=0.99, gate_size=3)

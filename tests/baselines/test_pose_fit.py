@@ -173,3 +173,21 @@ def test_bad_arguments(constant, no_jaxtyping):
         velocity_smoother(sc.ts[:-1], *args, bandwidth_hz=5.0)
     with pytest.raises(ValueError, match="bandwidth_hz"):
         velocity_smoother(sc.ts, *args, bandwidth_hz=0.0)
+
+
+def test_ekf_gate_rejects_outlier_pixels(constant):
+    """Three features' pixels thrown 30 px off at a few frames: with the gate the filter
+    equals the one told that those pixels are missing (NaN), to 1e-10; without, it does
+    not."""
+    sc, (pixels, camera) = constant
+    noisy = pixels + 0.1 * jax.random.normal(jax.random.key(5), pixels.shape)
+    frames, features = np.array([40, 90, 150]), np.array([0, 2, 3])
+    outliers = noisy.at[frames, features].add(30.0)
+    missing = noisy.at[frames, features].set(jnp.nan)
+    gated = ekf(sc.ts, outliers, camera, **EKF, gate=1.0 - 1e-6)
+    told = ekf(sc.ts, missing, camera, **EKF)
+    plain = ekf(sc.ts, outliers, camera, **EKF)
+    assert gated.result == told.result == RESULTS.successful
+    np.testing.assert_allclose(gated.outputs.v_hat, told.outputs.v_hat, rtol=1e-10, atol=1e-10)
+    gap = np.max(np.abs(np.asarray(plain.outputs.v_hat - told.outputs.v_hat)))
+    assert gap > 1e-3

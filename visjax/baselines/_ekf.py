@@ -13,9 +13,17 @@ Applications to Tracking and Navigation", ch. 10):
     semi-definite in floating point), with $H = \\partial h / \\partial x$.
 
 A missing component gets zero innovation and a zero row of $H$: it leaves the mean and the
-covariance as they are. The runner's result code says whether the run stayed finite and
-valid (`model.valid`); after a failure the mean and covariance are frozen at their last
-good values.
+covariance as they are.
+
+The outlier gate (optional, `gate`): the measurement's components come in blocks of
+`gate_size` (a feature's two pixel coordinates); a block $g$ whose squared Mahalanobis
+distance $\\nu_g^T S_{gg}^{-1} \\nu_g$ (its innovation against its block of $S$, all seen
+components' $S$) exceeds the `gate` quantile of the $\\chi^2$ distribution with
+`gate_size` degrees of freedom is rejected: treated as missing in this update (the
+textbook validation gate, Bar-Shalom et al., ch. 2.3).
+
+The runner's result code says whether the run stayed finite and valid (`model.valid`);
+after a failure the mean and covariance are frozen at their last good values.
 """
 
 from typing import final
@@ -23,6 +31,7 @@ from typing import final
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
 from .._util import as_float
@@ -54,7 +63,27 @@ class AbstractEKFModel(eqx.Module):
         return jnp.array(True)
 
 
-def _update(model, x, P, z, seen, u):
+def chi2_quantile(p, dof: int):
+    """The `p` quantile of the $\\chi^2$ distribution with `dof` degrees of freedom (closed
+    forms for 1 and 2; else bisection on the regularised incomplete gamma function)."""
+    p = jnp.asarray(p)
+    if dof == 1:
+        return jax.scipy.special.ndtri(0.5 * (1.0 + p)) ** 2
+    if dof == 2:
+        return -2.0 * jnp.log1p(-p)
+
+    def bisect(_, bounds):
+        lo, hi = bounds
+        mid = 0.5 * (lo + hi)
+        below = jax.scipy.special.gammainc(0.5 * dof, 0.5 * mid) < p
+        return jnp.where(below, mid, lo), jnp.where(below, hi, mid)
+
+    hi = jnp.asarray(dof + 100.0 * (dof + 1.0), p.dtype)  # well past any quantile < 1 - 1e-20
+    lo, hi = jax.lax.fori_loop(0, 200, bisect, (jnp.zeros_like(hi), hi))
+    return 0.5 * (lo + hi)
+
+
+def _innovation(model, x, P, z, seen, u):
     H = jax.jacfwd(model.measure)(x, u)
     H = jnp.where(seen[:, None], H, 0.0)
     innovation = jnp.where(seen, z - model.measure(x, u), 0.0)
@@ -62,12 +91,38 @@ def _update(model, x, P, z, seen, u):
     # a missing component: a unit variance on its own, decoupled from the others
     both = seen[:, None] & seen[None, :]
     R = jnp.where(both, R, jnp.eye(R.shape[0], dtype=R.dtype))
-    S = H @ P @ H.T + R
+    return H, innovation, R, H @ P @ H.T + R
+
+
+def _gated(innovation, S, seen, gate, size):
+    """The seen components whose block passes the gate (module docstring)."""
+    m = innovation.shape[0]
+    blocks = m // size
+    nu = innovation.reshape(blocks, size)
+    S_gg = jax.vmap(lambda g: jax.lax.dynamic_slice(S, (g * size, g * size), (size, size)))(
+        jnp.arange(blocks)
+    )
+    seen_g = seen.reshape(blocks, size)
+    # a block's components not seen: unit variance, zero innovation (decoupled already)
+    d2 = jax.vmap(lambda v, Sg: v @ jnp.linalg.solve(Sg, v))(nu, S_gg)
+    passed = d2 <= chi2_quantile(gate, size).astype(S.dtype)
+    keep = seen_g & passed[:, None]
+    rejected = jnp.sum(jnp.any(seen_g, axis=1) & ~passed)
+    return keep.reshape(m), rejected
+
+
+def _update(model, x, P, z, seen, u, gate=None, gate_size=1):
+    """The update; with `gate`, also the number of blocks the gate rejected."""
+    H, innovation, R, S = _innovation(model, x, P, z, seen, u)
+    rejected = jnp.zeros((), jnp.int32)
+    if gate is not None:
+        keep, rejected = _gated(innovation, S, seen, gate, gate_size)
+        H, innovation, R, S = _innovation(model, x, P, z, keep, u)
     gain = jnp.linalg.solve(S, H @ P).T  # P H^T S^{-1}, S and P symmetric
     x_new = x + gain @ innovation
     I_KH = jnp.eye(x.shape[0], dtype=x.dtype) - gain @ H
     P_new = I_KH @ P @ I_KH.T + gain @ R @ gain.T
-    return x_new, 0.5 * (P_new + P_new.T)
+    return x_new, 0.5 * (P_new + P_new.T), rejected.astype(x.dtype)
 
 
 def _predict(model, x, P, u, dt, substeps):
@@ -79,6 +134,10 @@ def _predict(model, x, P, u, dt, substeps):
         return model.transition(x, u, dt), 0.5 * (P + P.T)
 
     return jax.lax.fori_loop(0, substeps, step, (x, P))
+
+
+def _optional_float(x):
+    return None if x is None else as_float(x)
 
 
 @final
@@ -96,21 +155,26 @@ class EKFSample(eqx.Module):
 
 @final
 class EKFState(eqx.Module):
-    """The filter's mean `x` and covariance `P` after the update at time `t`, and the input
-    `u` held since then (the next prediction's)."""
+    """The filter's mean `x` and covariance `P` after the update at time `t`, the input
+    `u` held since then (the next prediction's), and the number of measurement blocks the
+    outlier gate has `rejected` so far (a float holding a whole number: the state is moved by
+    the runner's integrator, between samples by nothing)."""
 
     x: Float[Array, " n"]
     P: Float[Array, "n n"]
     t: Float[Array, ""]
     u: PyTree
+    rejected: Float[Array, ""]
 
 
 @final
 class EKFOutput(eqx.Module):
-    """The filtered mean `x` (n,) and covariance `P` (n, n) after a sample's update."""
+    """The filtered mean `x` (n,) and covariance `P` (n, n) after a sample's update, and the
+    number of measurement blocks the outlier gate has `rejected` up to it."""
 
     x: Float[Array, "*batch n"]
     P: Float[Array, "*batch n n"]
+    rejected: Float[Array, "*batch"]
 
 
 @final
@@ -121,14 +185,21 @@ class ExtendedKalmanFilter(AbstractJumpEstimator):
     with the sample's measurement (module docstring); between samples nothing moves.
 
     **Fields:** `model` (an `AbstractEKFModel`), the prior `x0` (n,) and `P0` (n, n) at the
-    first sample (before its update), `substeps` (static). Its stream's samples are
-    `EKFSample`s (`ekf_stream` builds them); run it at the sample times (`dt=None`).
+    first sample (before its update), `substeps` (static); `gate`: `None` (default: every
+    seen component is used) or the probability of the outlier gate (e.g. 0.999: a block
+    of the measurement further than that quantile of $\\chi^2_{\\text{gate\\_size}}$ in
+    Mahalanobis distance is rejected, module docstring); `gate_size` (static): the
+    components per block (2: a feature's pixel pair), dividing the measurement's size.
+    Its stream's samples are `EKFSample`s (`ekf_stream` builds them); run it at the sample
+    times (`dt=None`).
     """
 
     model: AbstractEKFModel
     x0: Float[Array, " n"] = eqx.field(converter=as_float)
     P0: Float[Array, "n n"] = eqx.field(converter=as_float)
     substeps: int = eqx.field(default=1, static=True)
+    gate: Float[Array, ""] | None = eqx.field(default=None, converter=_optional_float)
+    gate_size: int = eqx.field(default=2, static=True)
 
     def __check_init__(self):
         if self.x0.ndim != 1:
@@ -138,9 +209,28 @@ class ExtendedKalmanFilter(AbstractJumpEstimator):
             raise ValueError(f"`P0` must have shape ({n}, {n}); got {self.P0.shape}.")
         if not (isinstance(self.substeps, int) and self.substeps >= 1):
             raise ValueError(f"`substeps` must be a positive int; got {self.substeps!r}.")
+        if not (isinstance(self.gate_size, int) and self.gate_size >= 1):
+            raise ValueError(f"`gate_size` must be a positive int; got {self.gate_size!r}.")
+        if self.gate is not None:
+            if self.gate.shape != ():
+                raise ValueError(f"`gate` must be a scalar probability; got {self.gate.shape}.")
+            try:
+                value = float(np.asarray(self.gate))
+            except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+                value = None  # traced: `checks` gives the result code
+            if value is not None and not (0.0 < value < 1.0):
+                raise ValueError(
+                    f"`gate` must be a probability strictly between 0 and 1; got {value}."
+                )
+
+    def checks(self):
+        if self.gate is None:
+            return ()
+        return ((jnp.isfinite(self.gate) & (self.gate > 0.0) & (self.gate < 1.0),
+                 "`gate` must be a probability strictly between 0 and 1."),)  # fmt: skip
 
     def init(self, y0: EKFSample) -> EKFState:
-        return EKFState(x=self.x0, P=self.P0, t=y0.t, u=y0.u)
+        return EKFState(x=self.x0, P=self.P0, t=y0.t, u=y0.u, rejected=jnp.zeros((), self.x0.dtype))
 
     def vector_field(self, t, state: EKFState, y: EKFSample) -> EKFState:
         return jax.tree_util.tree_map(jnp.zeros_like, state)
@@ -152,11 +242,16 @@ class ExtendedKalmanFilter(AbstractJumpEstimator):
         later = gap > 0
         x = jnp.where(later, x_p, state.x)
         P = jnp.where(later, P_p, state.P)
-        x, P = _update(self.model, x, P, y.z, y.seen, y.u)
-        return EKFState(x=x, P=P, t=y.t, u=y.u)
+        z_size = y.z.shape[0]
+        if self.gate is not None and z_size % self.gate_size:
+            raise ValueError(
+                f"`gate_size` {self.gate_size} must divide the measurement's size {z_size}."
+            )
+        x, P, rejected = _update(self.model, x, P, y.z, y.seen, y.u, self.gate, self.gate_size)
+        return EKFState(x=x, P=P, t=y.t, u=y.u, rejected=state.rejected + rejected)
 
     def output(self, t, state: EKFState, y: EKFSample) -> EKFOutput:
-        return EKFOutput(x=state.x, P=state.P)
+        return EKFOutput(x=state.x, P=state.P, rejected=state.rejected)
 
     def valid(self, state: EKFState, y: EKFSample):
         return self.model.valid(state.x, y.u)
@@ -214,14 +309,17 @@ def extended_kalman_filter(
     *,
     present: Bool[ArrayLike, " N"] | None = None,
     substeps: int = 1,
+    gate: float | ArrayLike | None = None,
+    gate_size: int = 2,
     throw: bool = True,
 ) -> Solution:
     """Run an extended Kalman filter over a sampled stream: `run(ExtendedKalmanFilter(model,
-    x0, P0, substeps), ekf_stream(ts, zs, us, present=present))` at the sample times.
+    x0, P0, substeps, gate, gate_size), ekf_stream(ts, zs, us, present=present))` at the
+    sample times.
 
     **Arguments:** as `ExtendedKalmanFilter` and `ekf_stream`; `x0` (n,), `P0` (n, n) the
-    prior at `ts[0]`, before the first update; `throw`: raise on failure (default), else
-    return the result code.
+    prior at `ts[0]`, before the first update; `gate`, `gate_size`: the outlier gate
+    (`None`: off); `throw`: raise on failure (default), else return the result code.
 
     **Returns:** the runner's `Solution`: `outputs` an `EKFOutput` per sample (the mean and
     covariance after its update), `result`, `failed_sample` (the sample at which the
@@ -229,7 +327,11 @@ def extended_kalman_filter(
     sample it predicts to), the outputs frozen at the last good values after a failure.
     Works under `jit`, `vmap` (over streams, noise seeds, models) and `grad`.
     """
-    filt = ExtendedKalmanFilter(model=model, x0=x0, P0=P0, substeps=substeps)
+    if isinstance(gate, (int, float)) and not (0.0 < gate < 1.0):
+        raise ValueError(f"`gate` must be a probability strictly between 0 and 1; got {gate}.")
+    filt = ExtendedKalmanFilter(
+        model=model, x0=x0, P0=P0, substeps=substeps, gate=gate, gate_size=gate_size
+    )
     stream = ekf_stream(ts, zs, us, present=present, throw=False)
     return run(filt, stream, dt=None, throw=throw)
 

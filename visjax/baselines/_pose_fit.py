@@ -347,6 +347,7 @@ def velocity_ekf(
     max_jerk: float = 1.0,
     max_angular_jerk: float = 1.0,
     sigma_velocity: float = 1.0,
+    gate: float | None = None,
     throw: bool = True,
 ) -> Solution:
     """An extended Kalman filter of the object's pose and twist with a constant-acceleration
@@ -363,7 +364,8 @@ def velocity_ekf(
     per sample); prior: the first frame's pose (`frame_poses`) with 1 mm and 1 mrad,
     velocities and accelerations zero with `sigma_velocity` (per second for the
     accelerations). The features in the object frame come from the reference image as in
-    `frame_poses`.
+    `frame_poses`. `gate`: the probability of the outlier gate on each feature's pixel pair
+    (`ExtendedKalmanFilter`; `None`, the default: no gate).
 
     **Returns:** a `Solution` with `outputs` a `VelocityOutput` per frame (after that
     frame's update), `result` (`nonfinite_measurement` for an infinite pixel,
@@ -392,8 +394,9 @@ def velocity_ekf(
         [jnp.full(3, 1e-3), jnp.full(3, 1e-3), jnp.full(12, sigma_velocity)]
     ).astype(A.dtype)
     sol = extended_kalman_filter(
-        model, ts, pixels.reshape(pixels.shape[0], -1), None, x0, jnp.diag(sd**2), throw=False
-    )
+        model, ts, pixels.reshape(pixels.shape[0], -1), None, x0, jnp.diag(sd**2), gate=gate,
+        gate_size=2, throw=False,
+    )  # fmt: skip
     first_result = _at(first.result, 0)
     result = RESULTS.where(first_result != RESULTS.successful, first_result, sol.result)
     failed = jnp.where(first_result != RESULTS.successful, 0, sol.failed_sample)
