@@ -35,7 +35,14 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PyTree
 
 from .._util import as_float
-from ..estimators import AbstractJumpEstimator, Solution, Stream, checked_samples, run
+from ..estimators import (
+    AbstractJumpEstimator,
+    Solution,
+    Stream,
+    checked_samples,
+    reject_mask,
+    run,
+)
 
 
 class AbstractEKFModel(eqx.Module):
@@ -263,6 +270,7 @@ def ekf_stream(
     us: PyTree = None,
     *,
     present: Bool[ArrayLike, " N"] | None = None,
+    reject: Bool[ArrayLike, " N"] | Bool[ArrayLike, "N m"] | None = None,
     throw: bool = True,
 ) -> Stream:
     """The `Stream` of an `ExtendedKalmanFilter` from its measurements.
@@ -271,7 +279,9 @@ def ekf_stream(
     NaN component missing at that sample (its update skipped); `us` the known inputs, a
     pytree of leading size N (the held input of each interval), or `None`; `present` (N,):
     `False` skips a sample's update entirely (a dropped frame; the prediction still covers
-    its interval); `throw`: an infinite measurement component (a bad measurement, not a
+    its interval); `reject`: what an outlier test rejected, skipped as missing: (N,) whole
+    samples (their update), (N, m) single components; `throw`: an infinite measurement
+    component (a bad measurement, not a
     missing one) raises here, naming the sample; with `throw=False` `run` stops there with
     `RESULTS.nonfinite_measurement`.
     """
@@ -292,6 +302,10 @@ def ekf_stream(
     present = jnp.asarray(present, dtype=bool)
     if present.shape != (n_samples,):
         raise ValueError(f"`present` must have shape ({n_samples},); got {present.shape}.")
+    reject = reject_mask(reject, n_samples, zs.shape[1])
+    if reject is not None:
+        present = present & ~reject if reject.ndim == 1 else present
+        zs = jnp.where(reject, jnp.nan, zs) if reject.ndim == 2 else zs
     # a dropped sample is an update with nothing seen (the mean and covariance unchanged)
     seen = ~jnp.isnan(zs) & present[:, None]
     z = jnp.where(seen, zs, 0.0)

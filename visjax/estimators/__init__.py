@@ -24,6 +24,8 @@ from ._base import (
     WindowSummary as WindowSummary,
     checked_samples as checked_samples,
     integration_step as integration_step,
+    reject_mask as reject_mask,
+    rejected_samples as rejected_samples,
     run as run,
 )
 from ._filters import lowpass as lowpass, lowpass_delay as lowpass_delay

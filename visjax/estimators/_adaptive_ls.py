@@ -51,7 +51,7 @@ from ..geometry import (
     to_homogeneous,
     unknown_feature_regressors,
 )
-from ._base import AbstractJumpEstimator, Stream, checked_samples
+from ._base import AbstractJumpEstimator, Stream, checked_samples, reject_mask
 
 
 @final
@@ -130,20 +130,33 @@ def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
     )
 
 
-def static_points_stream(ts, R_b, x_b, p_s, p_c, omega_c, *, truth=None, throw=True) -> Stream:
+def static_points_stream(
+    ts, R_b, x_b, p_s, p_c, omega_c, *, reject=None, truth=None, throw=True
+) -> Stream:
     """The measurement `Stream` of `StaticPointsEstimator` from raw measurements.
 
     **Arguments:** `ts` (N,) the sample times (any rate; `run(..., dt=...)` holds the
     samples); the measured platform pose `R_b` (N, 3, 3), `x_b` (N, 3) in the world frame;
     the pixels of the unknown (`p_s`, (N, n, 2)) and known (`p_c`, (N, m, 2)) features, NaN
     where a feature was not seen (`platform_measurements`); the known features' world
-    positions `omega_c` (m, 3); `truth` for a reducer. `throw`: a sample that is not finite
+    positions `omega_c` (m, 3); `truth` for a reducer. `reject`: what an outlier test
+    rejected, treated as not seen: (N,) bool whole samples (every feature of that sample),
+    or (N, n + m) single features (the unknown ones first, then the known ones, in the
+    order of `p_s` and `p_c`). `throw`: a sample that is not finite
     once the features not seen are masked (a NaN or infinite pose, an infinite pixel)
     raises here, naming the sample; with `throw=False` `run` stops there with
     `RESULTS.nonfinite_measurement`.
     """
     ts = as_float(ts)
     check_shape(ts, (None,), "ts")
+    if reject is not None:
+        p_s, p_c = as_float(p_s), as_float(p_c)
+        n, m = p_s.shape[1], p_c.shape[1]
+        reject = reject_mask(reject, ts.shape[0], n + m)
+        if reject.ndim == 1:
+            reject = jnp.broadcast_to(reject[:, None], (ts.shape[0], n + m))
+        p_s = jnp.where(reject[:, :n, None], jnp.nan, p_s)
+        p_c = jnp.where(reject[:, n:, None], jnp.nan, p_c)
     ys = platform_measurements(R_b, x_b, p_s, p_c, omega_c)
     if ys.p_s.shape[0] != ts.shape[0]:
         raise ValueError(f"`ts` has {ts.shape[0]} samples but the pixels have {ys.p_s.shape[0]}.")

@@ -158,6 +158,39 @@ class Stream(eqx.Module):
         return Stream(ts=self.ts, ys=ys, truth=self.truth, present=self.present)
 
 
+def reject_mask(reject, n: int, per: int | None = None, name: str = "reject"):
+    """A stream builder's `reject` argument checked: `None`, a bool array (n,) (whole
+    samples), or, where the builder has `per` features, (n, per) (single features).
+
+    **Returns:** the flags as a bool array, or `None`."""
+    if reject is None:
+        return None
+    reject = jnp.asarray(reject)
+    if reject.dtype != jnp.bool_:
+        raise ValueError(
+            f"`{name}` must be a boolean mask (True: rejected); got dtype {reject.dtype}."
+        )
+    shapes = [(n,)] + ([] if per is None else [(n, per)])
+    if reject.shape not in shapes:
+        want = " or ".join(str(s) for s in shapes)
+        raise ValueError(f"`{name}` must have shape {want}; got {reject.shape}.")
+    return reject
+
+
+def rejected_samples(stream: Stream, reject) -> Stream:
+    """`stream` with the samples flagged in `reject` (n,) marked absent: `run` holds the
+    latest present sample over them, as over a dropped one. Sample 0 starts the run and
+    cannot be rejected (an error when the flags are concrete; under `jit` the run stops
+    at sample 0 with `nonfinite_measurement`)."""
+    if reject is None:
+        return stream
+    first = _concrete(reject[0])
+    if first is not None and bool(first):
+        raise ValueError("`reject[0]` is True: the first sample starts the run and must be kept.")
+    present = ~reject if stream.present is None else stream.present & ~reject
+    return eqx.tree_at(lambda s: s.present, stream, present, is_leaf=lambda x: x is None)
+
+
 def checked_samples(stream: Stream, builder: str, throw: bool) -> Stream:
     """A stream builder's `throw=True`: raise if a present sample of `stream.ys` is not
     finite (naming the first such sample when the samples are concrete), else return the

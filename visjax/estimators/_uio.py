@@ -20,13 +20,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import all_finite
 from .._util import as_float, check_shape, positive_finite
 from ..geometry import pixel_to_normalized
 from ..kinematics import camera_term, known_input_term
-from ._base import AbstractEstimator, Stream, checked_samples
+from ._base import AbstractEstimator, Stream, checked_samples, reject_mask
 
 C_OUTPUT = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # y = C x, eq. (3.1)
 
@@ -384,6 +384,7 @@ def moving_point_stream(
     *,
     truth=None,
     dropped: str = "stop",
+    reject: Bool[ArrayLike, " N"] | None = None,
     throw: bool = True,
 ) -> Stream:
     """The measurement `Stream` of the UIO from raw measurements.
@@ -409,6 +410,10 @@ def moving_point_stream(
         fast camera and a large scheduled depth gain this costs accuracy
         (`benchmarks/scenes_uio.py`: with 5% of the 50 Hz frames dropped, the sideways
         scene's depth RMS goes from 2.3 mm to 12.8 mm held, 2.2 mm extrapolated).
+    - `reject` (N,) bool: the frames an outlier test rejected; their pixels are replaced as
+        a dropped frame's (held, or extrapolated with `dropped="extrapolate"`; held with
+        `"stop"`: a rejected frame never stops the run), the camera velocities keep their
+        own samples. A rejected first frame has nothing to hold: it stops the run.
     - `throw`: a sample that is still not finite (a dropped frame with `dropped="stop"`, a
         dropped first frame, a non-finite camera velocity) raises here, naming the sample;
         with `throw=False` `run` stops there with `RESULTS.nonfinite_measurement`.
@@ -421,7 +426,14 @@ def moving_point_stream(
     check_shape(K_c, (3, 3), "K_c")
     if dropped not in ("stop", "hold", "extrapolate"):
         raise ValueError(f'`dropped` must be "stop", "hold" or "extrapolate"; got {dropped!r}.')
-    y = _normalized_held(ts, pixels, K_c, dropped)
+    reject = reject_mask(reject, n)
+    if reject is None:
+        y = _normalized_held(ts, pixels, K_c, dropped)
+    else:
+        marked = jnp.where(reject[:, None], jnp.nan, pixels)
+        y = _normalized_held(ts, marked, K_c, "hold" if dropped == "stop" else dropped)
+        if dropped == "stop":  # a frame that is NaN without being rejected still stops
+            y = jnp.where(reject[:, None], y, pixel_to_normalized(pixels, K_c))
     stream = Stream(ts=ts, ys=MovingCameraMeasurement(y=y, u=velocities), truth=truth)
     return checked_samples(stream, "moving_point_stream", throw)
 

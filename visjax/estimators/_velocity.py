@@ -45,7 +45,7 @@ from ..geometry import (
     so3_log,
     to_homogeneous,
 )
-from ._base import AbstractEstimator, Stream
+from ._base import AbstractEstimator, Stream, reject_mask, rejected_samples
 
 
 @final
@@ -706,6 +706,7 @@ def velocity_stream(
     camera: FixedCamera,
     *,
     dropped: str = "stop",
+    reject: Bool[ArrayLike, " N"] | Bool[ArrayLike, "N n"] | None = None,
     truth=None,
     throw: bool = True,
     chunk: int = 256,
@@ -732,10 +733,24 @@ def velocity_stream(
     frames for their result codes, `chunk` at a time), and with `throw=False` is all NaN:
     `run` stops there with `RESULTS.nonfinite_measurement` and its index.
 
+    `reject`: the samples an outlier test rejected, held as missing ones. (N,) bool: whole
+    frames, held over like a dropped frame (the first frame must be kept); (N, n): single
+    features, out of view in those frames (as a NaN pixel with `dropped="hold"`, which a
+    per-feature mask needs).
+
     **Returns:** the `Stream` (its `measure.camera` is `camera`).
     """
     pixels = _check_frames(pixels, ts)
     dropouts = _dropped(dropped)
+    reject = reject_mask(reject, pixels.shape[0], pixels.shape[1])
+    if reject is not None and reject.ndim == 2:
+        if not dropouts:
+            raise ValueError(
+                'a per-feature `reject` (N, n) needs `dropped="hold"` (a rejected feature is '
+                "out of view in that frame); reject whole frames with a mask of shape (N,)."
+            )
+        pixels = jnp.where(reject[..., None], jnp.nan, pixels)
+        reject = None
     ts = as_float(ts)
     if not isinstance(camera, FixedCamera):
         raise TypeError(
@@ -766,4 +781,5 @@ def velocity_stream(
             first = jax.tree_util.tree_map(lambda v: v[jnp.argmax(bad)], results)
             checked = first.error_if(camera.p_ref, jnp.any(bad))
             measure = eqx.tree_at(lambda m: m.camera.p_ref, measure, checked)
-    return Stream(ts=ts, ys=pixels, truth=truth, present=present, measure=measure, chunk=chunk)
+    stream = Stream(ts=ts, ys=pixels, truth=truth, present=present, measure=measure, chunk=chunk)
+    return rejected_samples(stream, reject)

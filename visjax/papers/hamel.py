@@ -58,7 +58,15 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS
-from ..estimators import AbstractJumpEstimator, SaveAt, Stream, checked_samples, run
+from ..estimators import (
+    AbstractJumpEstimator,
+    SaveAt,
+    Stream,
+    checked_samples,
+    reject_mask,
+    rejected_samples,
+    run,
+)
 from ..geometry import euclidean_reconstruction, pixel_to_normalized, skew, sl3_normalize
 from ..studies import AbstractProblem, Parameter
 
@@ -194,18 +202,22 @@ def homography_stream(
     group_velocity: Float[ArrayLike, "N 3 3"],
     K: Float[ArrayLike, "3 3"],
     *,
+    reject: Bool[ArrayLike, " N"] | None = None,
     truth=None,
     throw: bool = True,
 ) -> Stream:
     """The observer's stream from pixel tracks (N, n, 2) of a camera with intrinsics `K`
-    and the group velocity (N, 3, 3) at each sample. `throw`: a non-finite sample raises,
-    naming it; with `throw=False` the run stops there."""
+    and the group velocity (N, 3, 3) at each sample. `reject` (N,) bool: the samples an
+    outlier test rejected, held over as dropped ones (`Stream.present`; the first must be
+    kept). `throw`: a non-finite sample raises, naming it; with `throw=False` the run
+    stops there."""
     ts, pixels, A = (jnp.asarray(a, float) for a in (ts, pixels, group_velocity))
     if pixels.ndim != 3 or pixels.shape[-1] != 2 or pixels.shape[0] != ts.shape[0]:
         raise ValueError(f"`pixels` must have shape (N, n, 2) with N = {ts.shape[0]}.")
     if A.shape != (ts.shape[0], 3, 3):
         raise ValueError(f"`group_velocity` must have shape ({ts.shape[0]}, 3, 3); got {A.shape}.")
     stream = Stream(ts=ts, ys=HomographyMeasurement(p=unit_bearings(pixels, K), A=A), truth=truth)
+    stream = rejected_samples(stream, reject_mask(reject, ts.shape[0]))
     return checked_samples(stream, "homography_stream", throw)
 
 

@@ -54,6 +54,8 @@ from ..estimators import (
     Stream,
     checked_samples,
     moving_point_stream,
+    reject_mask,
+    rejected_samples,
     run,
 )
 from ..geometry import pixel_to_normalized, skew
@@ -200,13 +202,16 @@ def point_depth_stream(
     A: Float[ArrayLike, "3 3"],
     *,
     projection: _Projection = "planar",
+    reject: Bool[ArrayLike, " N"] | None = None,
     truth=None,
     throw: bool = True,
 ) -> Stream:
     """The observer's stream from pixel tracks (N, n, 2) of a camera with intrinsics `A`
     and its twists (N, 6) in the camera frame: normalized coordinates (planar) or their
-    unit bearing vectors (spherical). `throw`: a non-finite sample raises, naming it
-    (`checked_samples`); with `throw=False` the run stops there."""
+    unit bearing vectors (spherical). `reject` (N,) bool: the samples an outlier test
+    rejected, held over as dropped ones (`Stream.present`; the first must be kept).
+    `throw`: a non-finite sample raises, naming it (`checked_samples`); with
+    `throw=False` the run stops there."""
     ts, pixels, twists = (jnp.asarray(a, float) for a in (ts, pixels, twists))
     if pixels.ndim != 3 or pixels.shape[-1] != 2 or pixels.shape[0] != ts.shape[0]:
         raise ValueError(f"`pixels` must have shape (N, n, 2) with N = {ts.shape[0]}.")
@@ -219,6 +224,7 @@ def point_depth_stream(
         m = jnp.concatenate([m, jnp.ones_like(m[..., :1])], axis=-1)
         m = m / jnp.linalg.norm(m, axis=-1, keepdims=True)
     stream = Stream(ts=ts, ys=PointDepthMeasurement(s=m, u=twists), truth=truth)
+    stream = rejected_samples(stream, reject_mask(reject, ts.shape[0]))
     return checked_samples(stream, "point_depth_stream", throw)
 
 
