@@ -17,6 +17,12 @@ from ._ekf import (
     ekf_stream as ekf_stream,
     extended_kalman_filter as extended_kalman_filter,
 )
+from ._losses import (
+    Loss as Loss,
+    cauchy as cauchy,
+    covariance as covariance,
+    huber as huber,
+)
 from ._opencv import opencv_reconstruction as opencv_reconstruction
 from ._point_fit import (
     camera_poses as camera_poses,

@@ -33,17 +33,23 @@ from .._util import as_float, check_shape
 from ..estimators import FixedCamera, Solution, VelocityOutput
 from ..geometry import euclidean_reconstruction, so3_exp, so3_log
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
+from ._losses import as_loss, covariance
 
 
 @final
 class FramePoses(eqx.Module):
     """The object's pose per frame: `R` (N, 3, 3), `x_f` (N, 3) in the camera frame,
-    `rms_px` the reprojection RMS per frame, `result` per frame (a failed frame is NaN)."""
+    `rms_px` the reprojection RMS per frame, `result` per frame (a failed frame is NaN),
+    and `cov` (N, 6, 6) the covariance of the pose (`covariance`: the rotation as the
+    rotation vector $\phi$ of $R = e^{[\phi]_\times}R_0$ about the homography's estimate
+    $R_0$, then $x_f$) from the frame's own residuals; NaN without refinement or with
+    fewer than four features seen."""
 
     R: Float[Array, "*N 3 3"]
     x_f: Float[Array, "*N 3"]
     rms_px: Float[Array, "*N"]
     result: RESULTS
+    cov: Float[Array, "*N 6 6"]
 
 
 def object_features(camera: FixedCamera):
@@ -84,13 +90,18 @@ def frame_poses(
     *,
     refine: bool = True,
     max_steps: int = 1000,
+    loss=None,
 ) -> FramePoses:
     """The object's pose in every frame from the homography (Chitrakaran et al., eqs.
     (8)-(17), the known-normal path), refined by Gauss-Newton on the reprojection
     error in pixels (rotation as a rotation vector about the homography's estimate); a NaN
     pixel is a feature not seen in that frame (at least four must be). Vmapped over
-    frames; a frame that cannot be measured has its `result` and NaN pose."""
+    frames; a frame that cannot be measured has its `result` and NaN pose. `loss`: `None`
+    (least squares) or a robust `Loss` on each feature's pixel residual (`huber(k)`,
+    `cauchy(k)`, `k` in pixels): an outlier feature then weighs less. The covariance of
+    each pose (`FramePoses.cov`) is $\hat\sigma^2(J^TJ)^{-1}$ of the (rescaled) residuals."""
     pixels, p_ref, A, R_star, s1, n_star, z1_star = _check(pixels, camera)
+    loss = as_loss(loss)
     s, x_f_star = object_features(camera)
     d_star = z1_star * (n_star @ jnp.linalg.solve(A, jnp.append(p_ref[0], 1.0)))
     solver = optx.GaussNewton(rtol=1e-9, atol=1e-9)
@@ -111,12 +122,17 @@ def frame_poses(
             r = _pixels(A, so3_exp(y[0]) @ R0, y[1], s) - p_clean
             return jnp.where(seen[:, None], r, 0.0)
 
+        def robust(y, _):
+            return loss(residuals(y, None))
+
         y0 = (jnp.zeros(3, A.dtype), x0)
         if refine:
-            sol = optx.least_squares(residuals, solver, y0, max_steps=max_steps, throw=False)
+            sol = optx.least_squares(robust, solver, y0, max_steps=max_steps, throw=False)
             y, code = sol.value, RESULTS.promote(sol.result)
+            cov, _ = covariance(robust, y, None, 2 * jnp.sum(seen))
         else:
             y, code = y0, RESULTS.successful
+            cov = jnp.full((6, 6), jnp.nan, A.dtype)
         R, x_f = so3_exp(y[0]) @ R0, y[1]
         r = residuals(y, None)
         rms = jnp.sqrt(jnp.sum(r**2) / (2.0 * jnp.maximum(jnp.sum(seen), 1).astype(r.dtype)))
@@ -125,9 +141,12 @@ def frame_poses(
         result = RESULTS.where(
             (result == RESULTS.successful) & ~all_finite((R, x_f)), RESULTS.nonfinite_output, result
         )
+        result = RESULTS.where(
+            (result == RESULTS.successful) & ~loss.checks(), RESULTS.invalid_settings, result
+        )
         bad = result != RESULTS.successful
-        R, x_f, rms = (jnp.where(bad, jnp.nan, v) for v in (R, x_f, rms))
-        return FramePoses(R=R, x_f=x_f, rms_px=rms, result=result)
+        R, x_f, rms, cov = (jnp.where(bad, jnp.nan, v) for v in (R, x_f, rms, cov))
+        return FramePoses(R=R, x_f=x_f, rms_px=rms, result=result, cov=cov)
 
     return jax.vmap(one)(pixels)
 
