@@ -197,6 +197,9 @@ def build_parser() -> argparse.ArgumentParser:
     _arg(tr, "--max-features", _count, 200, "features alive at once (default 200)")
     _arg(tr, "--fb-threshold", _positive, 0.5, "forward-backward error that drops one, px")
     _arg(tr, "--fps", _positive, None, "frame rate (default: the video's)")
+    planar = "a planar scene: cut the tracks that do not follow the frames' homography"
+    _arg(tr, "--planar", help=planar, action="store_true")
+    _arg(tr, "--homography-threshold", _positive, 3.0, "px, the --planar test (default 3)")
     _arg(tr, "--quiet", help="no progress bar and no summary", action="store_true")
     tr.set_defaults(out_is_file=True)
 

@@ -210,7 +210,16 @@ def testbed_report(
 
 
 def track_report(
-    video, out, *, detector="corners", max_features=200, fb_threshold=0.5, fps=None, quiet=False
+    video,
+    out,
+    *,
+    detector="corners",
+    max_features=200,
+    fb_threshold=0.5,
+    fps=None,
+    planar=False,
+    homography_threshold=3.0,
+    quiet=False,
 ) -> dict:
     """Jang's thesis, sections 2.4 and 5.1: a video to pixel tracks by pyramidal KLT with a
     forward-backward check (`visjax.frontend.track_frames`).
@@ -218,10 +227,13 @@ def track_report(
     **Arguments:** `video` a file `visjax.frontend.read_video` reads (MP4 or `.npz`);
     `out` the tracks file: `.npz` with exactly the keys `t` (N,) seconds and `pixels`
     (N, n, 2), NaN where a feature is not seen, or `.csv` (`visjax.io.save_tracks_csv`);
-    `detector`, `max_features`, `fb_threshold` as in `track_frames`; `fps` overrides the
-    video's frame rate; `quiet` no progress bar and no summary line.
+    `detector`, `max_features`, `fb_threshold`, `planar`, `homography_threshold` as in
+    `track_frames`; `fps` overrides the video's frame rate; `quiet` no progress bar and no
+    summary line.
 
-    **Returns:** the summary: frames, features, features in frame 0, fraction tracked.
+    **Returns:** the summary: frames, features, features in frame 0, fraction tracked, and
+    `lost_tracks`: how many tracks each check ended (`visjax.frontend.LOST_REASONS`; with
+    `planar`, `homography` counts the outlier tracks cut).
     Raises `ValueError` (nothing written) when the detector finds no feature at all.
     """
     from .frontend import read_video, track_frames
@@ -236,7 +248,8 @@ def track_report(
         raise ValueError(f"{video}: the video does not state its frame rate; give --fps.")
     tracks = track_frames(
         frames, fps=rate, detector=detector, max_features=max_features,
-        fb_threshold=fb_threshold, progress=not quiet,
+        fb_threshold=fb_threshold, planar=planar, homography_threshold=homography_threshold,
+        progress=not quiet,
     )  # fmt: skip
     if tracks.pixels.shape[1] == 0:
         raise ValueError(f"{video}: the {detector!r} detector found no feature to track.")
@@ -251,13 +264,15 @@ def track_report(
         "features": int(tracks.pixels.shape[1]),
         "features_frame0": int(np.sum(tracks.born == 0)),
         "fraction_tracked": tracks.fraction_tracked,
+        "lost_tracks": tracks.lost_counts(),
     }
     if not quiet:
+        lost = ", ".join(f"{k} {v}" for k, v in summary["lost_tracks"].items() if v)
         print(
             f"tracked {summary['frames']} frames at {rate:g} Hz: {summary['features']} features "
             f"({summary['features_frame0']} in frame 0), "
             f"{summary['fraction_tracked']:.1%} of feature-frames since detection tracked; "
-            f"wrote {out}"
+            f"tracks ended by: {lost or 'none'}; wrote {out}"
         )
     return summary
 

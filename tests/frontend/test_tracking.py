@@ -413,3 +413,56 @@ def test_bad_inputs_raise_the_documented_errors(tmp_path):
     uv = project_points(K, R, p, np.array([p + R[:, 2], p - R[:, 2]]))
     np.testing.assert_allclose(uv[0], K[:2, 2], atol=1e-9)
     assert np.isnan(uv[1]).all()
+
+
+def test_homography_outliers_are_cut_where_they_drift():
+    """Thirty features of a plane seen by a moving camera (exact homographies, 0.3 px
+    noise), three of them drifting 0.5 px per frame from frame 12 (a feature sliding along
+    an edge): the three are cut, once their drift over the gap passes the threshold, and
+    no other track is touched."""
+    from visjax.frontend import LOST_REASONS, Tracks, reject_homography_outliers
+
+    rng = np.random.default_rng(0)
+    n_frames, n = 40, 30
+    A = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
+    p0 = rng.uniform([40, 40], [600, 440], size=(n, 2))
+    pixels = np.empty((n_frames, n, 2))
+    for k in range(n_frames):
+        R = _rot([0.2, 1.0, 0.1], 0.004 * k)
+        t = np.array([0.01, -0.004, 0.006]) * k
+        H = A @ (R - np.outer(t, [0, 0, 1.0]) / 2.0) @ np.linalg.inv(A)
+        q = np.c_[p0, np.ones(n)] @ H.T
+        pixels[k] = q[:, :2] / q[:, 2:]
+    pixels += 0.3 * rng.normal(size=pixels.shape)
+    drifting = np.array([3, 17, 25])
+    pixels[12:, drifting] += 0.5 * np.arange(1, n_frames - 11)[:, None, None] * np.array([1.0, 0.6])
+    tracks = Tracks(
+        t=np.arange(n_frames) / 30.0, pixels=pixels, born=np.zeros(n, int),
+        marker_id=np.full(n, -1), corner=np.full(n, -1), fps=30.0,
+    )  # fmt: skip
+    cut = reject_homography_outliers(tracks, threshold_px=3.0, gap=10)
+    assert np.isfinite(tracks.pixels).all()  # the input is not modified
+    others = np.setdiff1d(np.arange(n), drifting)
+    np.testing.assert_array_equal(cut.pixels[:, others], pixels[:, others])
+    assert np.all(cut.lost_reason[drifting] == LOST_REASONS.index("homography"))
+    assert np.all(cut.lost_reason[others] == -1)
+    # 0.5 x 1.17 px per frame: past 3 px over the 10-frame gap from about frame 17
+    assert np.all((cut.lost_frame[drifting] >= 15) & (cut.lost_frame[drifting] <= 20))
+    for j in drifting:
+        f = cut.lost_frame[j]
+        assert np.isnan(cut.pixels[f:, j]).all() and np.isfinite(cut.pixels[:f, j]).all()
+    assert cut.lost_counts()["homography"] == 3
+    with pytest.raises(ValueError, match="`gap` must be >= 1"):
+        reject_homography_outliers(tracks, gap=0)
+
+
+def test_cli_track_planar_reports_why_tracks_ended(tmp_path, capsys):
+    from visjax.cli import main
+
+    video = write_video(tmp_path / "small.mp4", _frames()[:12], 30.0)
+    out = tmp_path / "tracks.npz"
+    assert main(["track", str(video), "--out", str(out), "--planar", "--max-features", "40"]) == 0
+    printed = capsys.readouterr().out
+    assert "tracks ended by:" in printed
+    # the table is a plane: its tracks follow the homography (none cut at 3 px)
+    assert "homography" not in printed.split("tracks ended by:")[1]

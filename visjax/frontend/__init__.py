@@ -12,8 +12,10 @@ from ._scene_render import (
     textured_table as textured_table,
 )
 from ._tracking import (
+    LOST_REASONS as LOST_REASONS,
     Tracks as Tracks,
     detect_aruco as detect_aruco,
+    reject_homography_outliers as reject_homography_outliers,
     track_frames as track_frames,
     track_marker as track_marker,
 )

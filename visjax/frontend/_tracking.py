@@ -2,12 +2,15 @@
 with OpenCV's KLT at 30 Hz): detection, pyramidal KLT with a forward-backward check, and
 re-detection. NumPy and OpenCV, never jit."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ._scene_render import _ARUCO_DICTIONARY, _aruco_dictionary
 from ._video import _check_fps, check_frames
+
+# why a track ended (`Tracks.lost_reason`)
+LOST_REASONS = ("klt_status", "forward_backward", "residual", "left_image", "homography")
 
 
 @dataclass(frozen=True)
@@ -25,6 +28,11 @@ class Tracks:
     - `corner`: (n,) int, for an ArUco feature 0-3 its corner (top-left, top-right,
       bottom-right, bottom-left) or 4 its centre; else -1.
     - `fps`: frames per second.
+    - `lost_reason`: (n,) int, why each feature's track ended (an index into
+      `LOST_REASONS`: the KLT's status, the forward-backward check, the match residual,
+      leaving the image, an outlier to the frames' homography), -1 if it lasted to the
+      last frame or was not tracked by KLT. `lost_frame`: (n,) the first frame it is NaN
+      in, -1 if never lost.
 
     The same pixel-track convention as `visjax.io.load_tracks_csv`.
     """
@@ -35,6 +43,15 @@ class Tracks:
     marker_id: np.ndarray
     corner: np.ndarray
     fps: float
+    lost_reason: np.ndarray | None = None
+    lost_frame: np.ndarray | None = None
+
+    def lost_counts(self) -> dict:
+        """The number of tracks lost for each reason of `LOST_REASONS`."""
+        reasons = (
+            np.full(self.pixels.shape[1], -1) if self.lost_reason is None else self.lost_reason
+        )
+        return {name: int(np.sum(reasons == i)) for i, name in enumerate(LOST_REASONS)}
 
     @property
     def alive(self) -> np.ndarray:
@@ -146,6 +163,8 @@ def track_frames(
     max_residual=15.0,
     redetect_below: int | None = None,
     aruco_dictionary: str = _ARUCO_DICTIONARY,
+    planar: bool = False,
+    homography_threshold=3.0,
     progress: bool = False,
 ) -> Tracks:
     """Track features through grey frames with pyramidal KLT and a forward-backward check.
@@ -170,9 +189,12 @@ def track_frames(
       ways; `np.inf` turns it off.
     - `redetect_below`: detect new features when fewer than this are alive; default
       `max_features // 2` when detecting, 0 (never) with `points`.
+    - `planar`: the scene is a plane (or the camera only rotates): after tracking, cut the
+      tracks that do not follow the frames' homography (`reject_homography_outliers`,
+      threshold `homography_threshold` pixels).
     - `progress`: a tqdm progress bar over frames.
 
-    **Returns:** a `Tracks`.
+    **Returns:** a `Tracks` (with why and when each lost track ended).
 
     Each step tracks frame k-1 to k with `cv2.calcOpticalFlowPyrLK`, then back from k to
     k-1; a feature is dropped (NaN from frame k on, never revived) when either pass fails
@@ -220,6 +242,7 @@ def track_frames(
     for col, p in zip(columns, px0, strict=True):
         col[0] = p
     born = [0] * len(px0)
+    lost_reason, lost_frame = [-1] * len(px0), [-1] * len(px0)
     marker_id, corner = list(mid0), list(cid0)
     alive = list(range(len(px0)))  # column indices
 
@@ -237,20 +260,16 @@ def track_frames(
             p0r, st2, _ = cv2.calcOpticalFlowPyrLK(frames[k], frames[k - 1], p1, None, **lk)
             p1 = p1.reshape(-1, 2).astype(float)
             fb = np.linalg.norm(p0r.reshape(-1, 2) - p0.reshape(-1, 2), axis=1)
-            ok = (
-                (st1.ravel() == 1)
-                & (st2.ravel() == 1)
-                & (fb <= fb_threshold)
-                & (residual.ravel() <= max_residual)
-                & np.all(np.isfinite(p1), axis=1)
-                & (p1[:, 0] >= 0)
-                & (p1[:, 0] <= w - 1)
-                & (p1[:, 1] >= 0)
-                & (p1[:, 1] <= h - 1)
-            )
-            for j, p, good in zip(alive, p1, ok, strict=True):
+            status = (st1.ravel() == 1) & (st2.ravel() == 1) & np.all(np.isfinite(p1), axis=1)
+            inside = (p1[:, 0] >= 0) & (p1[:, 0] <= w - 1) & (p1[:, 1] >= 0) & (p1[:, 1] <= h - 1)
+            checks = (status, fb <= fb_threshold, residual.ravel() <= max_residual, inside)
+            ok = np.logical_and.reduce(checks)
+            for i, (j, p, good) in enumerate(zip(alive, p1, ok, strict=True)):
                 if good:
                     columns[j][k] = p
+                else:  # the first check it failed, in the order of LOST_REASONS
+                    lost_reason[j] = next(r for r, c in enumerate(checks) if not c[i])
+                    lost_frame[j] = k
             alive = [j for j, good in zip(alive, ok, strict=True) if good]
         if len(alive) < redetect_below:
             alive_px = np.array([columns[j][k] for j in alive]).reshape(-1, 2)
@@ -269,17 +288,69 @@ def track_frames(
                 alive.append(len(columns))
                 columns.append(col)
                 born.append(k)
+                lost_reason.append(-1)
+                lost_frame.append(-1)
                 marker_id.append(m)
                 corner.append(c)
     pixels = np.stack(columns, axis=1) if columns else np.zeros((n_frames, 0, 2))
-    return Tracks(
+    tracks = Tracks(
         t=np.arange(n_frames) / fps,
         pixels=pixels,
         born=np.array(born, int),
         marker_id=np.array(marker_id, int),
         corner=np.array(corner, int),
         fps=fps,
+        lost_reason=np.array(lost_reason, int),
+        lost_frame=np.array(lost_frame, int),
     )
+    if planar:
+        tracks = reject_homography_outliers(tracks, threshold_px=homography_threshold)
+    return tracks
+
+
+def reject_homography_outliers(
+    tracks: Tracks, *, threshold_px=3.0, gap: int = 10, min_tracks: int = 8
+) -> Tracks:
+    """Cut the tracks that do not follow the frames' homography: for a planar scene (or a
+    camera that only rotates) every feature's pixels in frames $k - g$ and $k$ are related
+    by one homography $H_k$. At each frame $k \ge g$ (`gap` $= g$) $H_k$ is fitted by
+    RANSAC (`cv2.findHomography`, reprojection threshold `threshold_px`) to the features
+    tracked in both frames (at least `min_tracks`; fewer: the frame is not tested); a
+    feature whose transfer error $\|p_k - H_k p_{k-g}\|$ exceeds `threshold_px` is an
+    outlier (a feature sliding along an edge, a point off the plane, a false match) and is
+    NaN from frame $k$ on, its `lost_reason` `"homography"`. A gap of several frames finds
+    a slow drift that one frame would not.
+
+    **Returns:** the `Tracks` with the outliers cut (the input is not modified).
+    """
+    import cv2
+
+    gap, min_tracks = int(gap), int(min_tracks)
+    if gap < 1 or min_tracks < 4 or not threshold_px > 0:
+        raise ValueError(
+            "`gap` must be >= 1, `min_tracks` >= 4 and `threshold_px` positive; got "
+            f"{gap}, {min_tracks}, {threshold_px}."
+        )
+    pixels = tracks.pixels.copy()
+    n = pixels.shape[1]
+    reason = np.full(n, -1) if tracks.lost_reason is None else tracks.lost_reason.copy()
+    frame = np.full(n, -1) if tracks.lost_frame is None else tracks.lost_frame.copy()
+    homography = LOST_REASONS.index("homography")
+    for k in range(gap, pixels.shape[0]):
+        both = np.all(np.isfinite(pixels[k - gap]), axis=1) & np.all(np.isfinite(pixels[k]), axis=1)
+        idx = np.flatnonzero(both)
+        if idx.size < min_tracks:
+            continue
+        src, dst = pixels[k - gap, idx], pixels[k, idx]
+        H, _ = cv2.findHomography(src, dst, cv2.RANSAC, float(threshold_px), maxIters=2000)
+        if H is None:
+            continue
+        q = np.c_[src, np.ones(len(src))] @ H.T
+        err = np.linalg.norm(q[:, :2] / q[:, 2:] - dst, axis=1)
+        for j in idx[~(err <= threshold_px)]:
+            pixels[k:, j] = np.nan
+            reason[j], frame[j] = homography, k
+    return replace(tracks, pixels=pixels, lost_reason=reason, lost_frame=frame)
 
 
 _SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # the marker's corners
