@@ -79,6 +79,11 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "declares for its gains (`max_stable_dt`): the run would diverge. Use a smaller "
         "`dt` (the measurement is held between samples)."
     )
+    too_few_inliers = (
+        "Fewer than four correspondences agree with any homography within the inlier "
+        "threshold (RANSAC found no consensus, or the threshold is not positive): no "
+        "homography is determined."
+    )
 
 
 def raise_or_keep(result, x, throw: bool):

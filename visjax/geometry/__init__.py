@@ -27,6 +27,10 @@ from ._reconstruction import (
     Reconstruction as Reconstruction,
     euclidean_reconstruction as euclidean_reconstruction,
 )
+from ._robust import (
+    RobustHomography as RobustHomography,
+    find_homography_robust as find_homography_robust,
+)
 from ._sl3 import (
     sl3_exp as sl3_exp,
     sl3_normalize as sl3_normalize,
