@@ -48,6 +48,12 @@ BENCHMARKS = {
         [],
         ["--runs", "32", "--chunk", "8", "--duration", "0.1", "--repeats", "1"],
     ),
+    "robust_homography": (
+        "robust_homography.py",
+        [],
+        ["--frames", "20", "--iterations", "200", "--repeats", "1"],
+    ),
+    "vs_gtsam": ("vs_gtsam.py", [], ["--problems", "16", "--repeats", "1"]),
 }
 
 

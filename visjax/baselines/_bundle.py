@@ -12,6 +12,9 @@ world point $\\omega$ is at $\\bar m = R_c^T(R_b^T(\\omega - x_b) - x_c)$ in the
 and at the pixel $p = A\\bar m / \\bar m_z$; the residuals are pixels, measured minus
 predicted, of the known features (`omega_c` given) and of the unknown ones, zero where a
 feature was not seen. Not in the paper: a baseline to compare its estimator against.
+With a calibrated camera (`intrinsics="known"`) $A$ is held and only the mounting and the
+features are fitted. `tests/baselines/test_vs_gtsam.py` checks both against GTSAM's
+Levenberg-Marquardt on the same factor graph.
 """
 
 from typing import final
@@ -53,15 +56,17 @@ def _camera_point(R_b, x_b, R_c, x_c, w):
     return R_c.T @ (R_b.T @ (w - x_b) - x_c)
 
 
-def _unpack(y, scale):
-    a = y["a"] * scale
+def _unpack(y, scale, a_known):
+    """The camera and features of the unknowns `y`; the intrinsics are `a_known` (relative
+    to `scale`, like `y["a"]`) where they are not among the unknowns (`intrinsics="known"`)."""
+    a = (y["a"] if "a" in y else a_known) * scale
     return _A_from(a), so3_exp(y["r_c"]), y["x_c"], y["omega_s"]
 
 
 def _residuals(y, args):
     """Pixel residuals (measured - predicted) of every frame and feature, masked."""
-    R_b, x_b, p_s, p_c, vis_s, vis_c, omega_c, frame_mask, scale = args
-    A, R_c, x_c, omega_s = _unpack(y, scale)
+    R_b, x_b, p_s, p_c, vis_s, vis_c, omega_c, frame_mask, scale, a_known = args
+    A, R_c, x_c, omega_s = _unpack(y, scale, a_known)
 
     def frame(R, x, ps, pc, vs, vc, keep):
         def pixel(w, p, seen):
@@ -78,8 +83,8 @@ def _residuals(y, args):
 
 
 def _depths(y, args):
-    R_b, x_b, _, _, vis_s, vis_c, omega_c, frame_mask, scale = args
-    _, R_c, x_c, omega_s = _unpack(y, scale)
+    R_b, x_b, _, _, vis_s, vis_c, omega_c, frame_mask, scale, a_known = args
+    _, R_c, x_c, omega_s = _unpack(y, scale, a_known)
     ws = jnp.concatenate([omega_s, omega_c])
     seen = jnp.concatenate([vis_s, vis_c], axis=1) & frame_mask[:, None]
     z = jax.vmap(lambda R, x: jax.vmap(lambda w: _camera_point(R, x, R_c, x_c, w)[2])(ws))(R_b, x_b)
@@ -109,7 +114,7 @@ def _check(estimator, stream, omega_c):
 def _fit(y_init, args, solver, max_steps):
     sol = optx.least_squares(_residuals, solver, y_init, args, max_steps=max_steps, throw=False)
     r = _residuals(sol.value, args)
-    R_b, x_b, _, _, vis_s, vis_c, _, frame_mask, _ = args
+    R_b, x_b, _, _, vis_s, vis_c, _, frame_mask, _, _ = args
     seen = jnp.concatenate([vis_s, vis_c], axis=1) & frame_mask[:, None]
     count = jnp.maximum(jnp.sum(seen), 1).astype(r.dtype)
     rms = jnp.sqrt(jnp.sum(r**2) / (2.0 * count))
@@ -134,6 +139,7 @@ def bundle_adjustment(
     *,
     window: int | None = None,
     every: int = 1,
+    intrinsics: str = "fit",
     max_steps: int = 256,
     rtol: float = 1e-9,
     atol: float = 1e-9,
@@ -156,7 +162,13 @@ def bundle_adjustment(
         variant, a fit at every `every`-th sample over the last `W` frames up to it
         (fewer at the start), warm-started from the previous fit; the estimate at time
         $t$ uses only frames up to $t$ and is held between fits.
-    - `max_steps`, `rtol`, `atol`: of the Levenberg-Marquardt solver.
+    - `intrinsics`: `"fit"` (default): the five intrinsics of eq. (4) are unknowns (the
+        uncalibrated camera of the paper). `"known"`: a calibrated camera; the intrinsics
+        are held at the estimator's initial ones (its output's `A` at the first sample)
+        and only the mounting and the unknown features are fitted; every output's `A` is
+        that matrix.
+    - `max_steps`, `rtol`, `atol`: of the Levenberg-Marquardt solver (its cost is
+        $\\frac12\\sum r^2$ over the pixel residuals $r$).
     - `throw`: raise on failure (default), else report it in `Solution.result`.
 
     **Returns:** a `Solution` with `ts = stream.ts`, `outputs` an `AdaptiveOutput` per
@@ -174,18 +186,18 @@ def bundle_adjustment(
         raise ValueError(f"`window` must be None or a positive int; got {window!r}.")
     if not (isinstance(every, int) and every >= 1):
         raise ValueError(f"`every` must be a positive int; got {every!r}.")
+    if intrinsics not in ("fit", "known"):
+        raise ValueError(f'`intrinsics` must be "fit" or "known"; got {intrinsics!r}.')
 
     y0 = jax.tree_util.tree_map(lambda x: x[0], ys)
     init = _initial(estimator, y0)
     a0 = jnp.stack([init.A[0, 0], init.A[0, 1], init.A[0, 2], init.A[1, 1], init.A[1, 2]])
     # unknowns of order one: the intrinsics relative to the nominal focal length
     scale = jnp.abs(init.A[0, 0])
-    y_init = {
-        "a": a0 / scale,
-        "r_c": so3_log(init.R_c),
-        "x_c": init.x_c,
-        "omega_s": init.omega_s,
-    }
+    y_init = {"r_c": so3_log(init.R_c), "x_c": init.x_c, "omega_s": init.omega_s}
+    if intrinsics == "fit":
+        y_init["a"] = a0 / scale
+    a_known = a0 / scale  # the intrinsics where they are not fitted
     present = jnp.ones(n_frames, bool) if stream.present is None else jnp.asarray(stream.present)
     # seen: the stream's flags (NaN pixels are already unseen); an infinite pixel that is
     # marked seen is a bad measurement
@@ -200,7 +212,7 @@ def bundle_adjustment(
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
     def to_output(y):
-        A, R_c, x_c, omega_s = _unpack(y, scale)
+        A, R_c, x_c, omega_s = _unpack(y, scale, a_known)
         return AdaptiveOutput(omega_s=omega_s, A=A, R_c=R_c, x_c=x_c)
 
     def clean(x):
@@ -210,7 +222,8 @@ def bundle_adjustment(
 
     if window is None:
         R_b, x_b, p_s, p_c, vs, vc, keep = data
-        args = (clean(R_b), clean(x_b), clean(p_s), clean(p_c), vs, vc, omega_c, keep, scale)
+        clean_data = (clean(R_b), clean(x_b), clean(p_s), clean(p_c), vs, vc)
+        args = (*clean_data, omega_c, keep, scale, a_known)
         y, result, rms, steps = _fit(y_init, args, solver, max_steps)
         result = RESULTS.where(bad, RESULTS.nonfinite_measurement, result)
         out = to_output(y)
@@ -238,7 +251,8 @@ def bundle_adjustment(
         def body(carry, k):
             y_prev, result, failed = carry
             sl = lambda x: jax.lax.dynamic_slice_in_dim(x, k, W)  # noqa: E731
-            args = (sl(R_b), sl(x_b), sl(p_s), sl(p_c), sl(vs), sl(vc), omega_c, sl(keep), scale)
+            window_data = (sl(R_b), sl(x_b), sl(p_s), sl(p_c), sl(vs), sl(vc))
+            args = (*window_data, omega_c, sl(keep), scale, a_known)
             y, code, rms, steps = _fit(y_prev, args, solver, max_steps)
             code = RESULTS.where(seen_bad[k], RESULTS.nonfinite_measurement, code)
             result, failed = first_failure(result, failed, code, k)
@@ -273,14 +287,10 @@ def bundle_adjustment_residuals(
     vis_c = (ys.visible_c > 0) & jnp.all(jnp.isfinite(ys.p_c), axis=-1)
     n_frames = jnp.shape(stream.ts)[0]
     scale = jnp.ones((), A.dtype)
-    y = {
-        "a": jnp.stack([A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2]]),
-        "r_c": so3_log(R_c),
-        "x_c": x_c,
-        "omega_s": omega_s,
-    }
+    a = jnp.stack([A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2]])
+    y = {"a": a, "r_c": so3_log(R_c), "x_c": x_c, "omega_s": omega_s}
     keep = jnp.ones(n_frames, bool)
-    args = (ys.R_b, ys.x_b, ys.p_s, ys.p_c, vis_s, vis_c, omega_c, keep, scale)
+    args = (ys.R_b, ys.x_b, ys.p_s, ys.p_c, vis_s, vis_c, omega_c, keep, scale, a)
     return _residuals(y, args)
 
 

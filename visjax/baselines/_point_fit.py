@@ -24,10 +24,22 @@ functions)), and each normalised measurement $y_j$ gives the two linear
 equations $(y_{j,r} e_3 - e_r)^T m_j = 0$, $r = 1, 2$ (the collinearity of $[y_j, 1]$ and
 $m_j$, eq. (3.1)). The least-squares solution is exact for noise-free data whose point
 follows the model; the estimate at $t_k$ is $m_k = P(0)$, and $[X/Z, Y/Z, 1/Z]$ of it.
+
+Refinement. The algebraic residuals above weigh each frame by the point's depth, so under
+pixel noise the linear solution is not the maximum-likelihood one. For a static point
+(`order=0`) `refine=True` takes it as the start of a Levenberg-Marquardt minimisation of
+the reprojection residuals in normalised coordinates, $r_j = y_j - \\pi(R_{kj}^T(P -
+c_{kj}))$ with $\\pi(m) = [m_1/m_3, m_2/m_3]$ ($R_{kj} = R_k^TR_j$, $c_{kj} = R_k^T(c_j -
+c_k)$: frame $j$'s pose in frame $k$), the cost $\\frac12\\sum_j\\|r_j\\|^2$ that
+`triangulation_residuals` evaluates: the maximum-likelihood point under isotropic
+Gaussian pixel noise and equal focal lengths (the classical two-step triangulation, a
+linear start refined by nonlinear least squares: Hartley and Zisserman, *Multiple View
+Geometry in Computer Vision*, 2nd ed., sections 12.2 and 12.3).
 """
 
 import jax
 import jax.numpy as jnp
+import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, all_finite, raise_or_keep
@@ -70,6 +82,23 @@ def camera_poses(ts: Float[ArrayLike, " N"], u: Float[ArrayLike, "N 6"]):
     return jnp.concatenate([first[0][None], R]), jnp.concatenate([first[1][None], c])
 
 
+def _reprojection(P, R_kj, c_kj, y, use):
+    """The reprojection residuals of a static point `P` (frame k's coordinates) in the
+    frames of a window: $y_j - \\pi(R_{kj}^T(P - c_{kj}))$ (module docstring), zero where
+    `use` is false (the depth there replaced by 1, so value and gradient stay finite)."""
+    m = jnp.einsum("nji,nj->ni", R_kj, P[None] - c_kj)  # R_kj^T (P - c_kj)
+    z = jnp.where(use, m[:, 2], 1.0)
+    return jnp.where(use[:, None], y - m[:, :2] / z[:, None], 0.0)
+
+
+def _window_poses(R, c, k, idx):
+    """The poses of the frames `idx` in frame `k`'s coordinates: $R_{kj} = R_k^TR_j$,
+    $c_{kj} = R_k^T(c_j - c_k)$."""
+    R_kj = jnp.einsum("ji,njk->nik", R[k], R[idx])  # R_k^T R_j
+    c_kj = (c[idx] - c[k][None]) @ R[k]  # R_k^T (c_j - c_k)
+    return R_kj, c_kj
+
+
 def _check_stream(stream):
     if not isinstance(stream, Stream):
         raise ValueError(f"`stream` must be a visjax Stream; got {type(stream).__name__}.")
@@ -94,6 +123,10 @@ def triangulate_point(
     window: int,
     order: int = 0,
     rcond: float = 1e-9,
+    refine: bool = False,
+    max_steps: int = 64,
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
     throw: bool = True,
 ) -> Solution:
     """Triangulate the point at every frame from the last `window` frames (fewer at the
@@ -105,21 +138,36 @@ def triangulate_point(
     static point); `rcond` the smallest accepted ratio of the smallest to the largest
     eigenvalue of the normal equations (scaled to unit columns): below it the window does
     not determine the point (no camera translation, too few frames), `RESULTS.singular`;
-    `throw` as for the estimators.
+    `refine` (static point only, `order=0`): start a Levenberg-Marquardt minimisation of
+    the reprojection residuals (module docstring; the cost of `triangulation_residuals`)
+    from each window's linear solution, and return its minimiser, the maximum-likelihood
+    point under isotropic pixel noise; `max_steps`, `rtol`, `atol` those of its solver
+    (`optimistix.LevenbergMarquardt`; the residuals are normalised coordinates, the
+    unknowns in the units of the camera velocities), unused without `refine`; `throw` as
+    for the estimators.
 
     **Returns:** a `Solution` with `ts`, `outputs` a `UIOOutput` per frame (position in the
     current camera frame, in the units of the camera velocities; NaN during the warm-up,
     before the first window that determines a point in front of the camera), `result`
-    (the first failure after the warm-up: a singular window, a point behind the camera, a
-    non-finite measurement), `failed_sample`, and the code of every window as
-    `diagnostics`. Causal: the estimate at $t$ uses frames up to $t$ only. Works under
-    `jit`, `vmap` and `grad`.
+    (the first failure after the warm-up: a singular window, a refinement that failed (the
+    solver's code promoted into `RESULTS`), a point behind the camera (the refined point
+    with `refine`), a non-finite measurement), `failed_sample`, and the code of every
+    window as `diagnostics`. Causal: the estimate at $t$ uses frames up to $t$ only.
+    Works under `jit`, `vmap` and `grad` (with `refine`, by the implicit function theorem
+    at each window's minimum).
     """
     y, u = _check_stream(stream)
     if not (isinstance(window, int) and window >= 2):
         raise ValueError(f"`window` must be an int of at least 2; got {window!r}.")
     if order not in (0, 1, 2):
         raise ValueError(f"`order` must be 0, 1 or 2; got {order!r}.")
+    if refine and order != 0:
+        raise ValueError(
+            "`refine=True` minimises the reprojection error of a static point: it needs "
+            f"`order=0`; got `order={order!r}`."
+        )
+    if not (isinstance(max_steps, int) and max_steps >= 1):
+        raise ValueError(f"`max_steps` must be a positive int; got {max_steps!r}.")
     ts = jnp.asarray(stream.ts)
     n = ts.shape[0]
     seen = jnp.all(jnp.isfinite(y), axis=1)
@@ -130,13 +178,13 @@ def triangulate_point(
     R, c = camera_poses(ts, jnp.where(jnp.isfinite(u), u, 0.0))
     offsets = jnp.arange(-(window - 1), 1)
     n_par = 3 * (order + 1)
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
 
     def fit(k):
         idx = k + offsets
         use = (idx >= 0) & seen[jnp.clip(idx, 0, n - 1)]
         idx = jnp.clip(idx, 0, n - 1)
-        R_kj = jnp.einsum("ji,njk->nik", R[k], R[idx])  # R_k^T R_j
-        c_kj = (c[idx] - c[k][None]) @ R[k]  # R_k^T (c_j - c_k)
+        R_kj, c_kj = _window_poses(R, c, k, idx)
         tau = ts[idx] - ts[k]
         span = jnp.maximum(jnp.max(jnp.where(use, -tau, 0.0)), jnp.finfo(ts.dtype).tiny)
         powers = jnp.stack([(tau / span) ** i for i in range(order + 1)], axis=1)
@@ -159,11 +207,31 @@ def triangulate_point(
         determined = ev[0] > rcond * ev[-1]
         a = jnp.linalg.solve(Gs, (M.T @ b) / d) / d
         m = a[:3]  # P(0): the point at t_k in frame k
-        ok = determined & (m[2] > 0.0) & all_finite(m)
+        refined = RESULTS.successful
+        if refine:
+            # from the linear solution where it is a point in front of the camera (else
+            # from one on the optical axis: the window's code says it failed anyway)
+            start = determined & (m[2] > 0.0) & all_finite(m)
+            m0 = jnp.where(start, m, jnp.array([0.0, 0.0, 1.0], m.dtype))
+            data = (R_kj, c_kj, y_clean[idx], use)
+            sol = optx.least_squares(
+                lambda P, d: _reprojection(P, *d),
+                solver,
+                m0,
+                data,
+                max_steps=max_steps,
+                throw=False,
+            )
+            m, refined = sol.value, RESULTS.promote(sol.result)
+        ok = determined & (refined == RESULTS.successful) & (m[2] > 0.0) & all_finite(m)
         code = RESULTS.where(
             ~determined,
             RESULTS.singular,
-            RESULTS.where(all_finite(m), RESULTS.behind_camera, RESULTS.nonfinite_output),
+            RESULTS.where(
+                refined != RESULTS.successful,
+                refined,
+                RESULTS.where(all_finite(m), RESULTS.behind_camera, RESULTS.nonfinite_output),
+            ),
         )
         code = RESULTS.where(ok, RESULTS.successful, code)
         code = RESULTS.where(bad_input[k], RESULTS.nonfinite_measurement, code)
@@ -201,10 +269,9 @@ def triangulation_residuals(
     y, u = _check_stream(stream)
     R, c = camera_poses(stream.ts, u)
     idx = jnp.arange(k - window + 1, k + 1)
-    R_kj = jnp.einsum("ji,njk->nik", R[k], R[idx])  # R_k^T R_j
-    c_kj = (c[idx] - c[k][None]) @ R[k]  # R_k^T (c_j - c_k)
-    m = jnp.einsum("nji,nj->ni", R_kj, jnp.asarray(position)[None] - c_kj)  # R_kj^T (P - c)
-    return y[idx] - m[:, :2] / m[:, 2:]
+    R_kj, c_kj = _window_poses(R, c, k, idx)
+    use = jnp.ones(idx.shape, bool)
+    return _reprojection(jnp.asarray(position), R_kj, c_kj, y[idx], use)
 
 
 class _InverseDepth(AbstractEKFModel):

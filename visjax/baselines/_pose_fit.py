@@ -41,7 +41,7 @@ class FramePoses(eqx.Module):
     """The object's pose per frame: `R` (N, 3, 3), `x_f` (N, 3) in the camera frame,
     `rms_px` the reprojection RMS per frame, `result` per frame (a failed frame is NaN),
     and `cov` (N, 6, 6) the covariance of the pose (`covariance`: the rotation as the
-    rotation vector $\phi$ of $R = e^{[\phi]_\times}R_0$ about the homography's estimate
+    rotation vector $\\phi$ of $R = e^{[\\phi]_\\times}R_0$ about the homography's estimate
     $R_0$, then $x_f$) from the frame's own residuals; NaN without refinement or with
     fewer than four features seen."""
 
@@ -99,7 +99,7 @@ def frame_poses(
     frames; a frame that cannot be measured has its `result` and NaN pose. `loss`: `None`
     (least squares) or a robust `Loss` on each feature's pixel residual (`huber(k)`,
     `cauchy(k)`, `k` in pixels): an outlier feature then weighs less. The covariance of
-    each pose (`FramePoses.cov`) is $\hat\sigma^2(J^TJ)^{-1}$ of the (rescaled) residuals."""
+    each pose (`FramePoses.cov`) is $\\hat\\sigma^2(J^TJ)^{-1}$ of the (rescaled) residuals."""
     pixels, p_ref, A, R_star, s1, n_star, z1_star = _check(pixels, camera)
     loss = as_loss(loss)
     s, x_f_star = object_features(camera)

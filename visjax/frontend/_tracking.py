@@ -313,10 +313,10 @@ def reject_homography_outliers(
 ) -> Tracks:
     """Cut the tracks that do not follow the frames' homography: for a planar scene (or a
     camera that only rotates) every feature's pixels in frames $k - g$ and $k$ are related
-    by one homography $H_k$. At each frame $k \ge g$ (`gap` $= g$) $H_k$ is fitted by
+    by one homography $H_k$. At each frame $k \\ge g$ (`gap` $= g$) $H_k$ is fitted by
     RANSAC (`cv2.findHomography`, reprojection threshold `threshold_px`) to the features
     tracked in both frames (at least `min_tracks`; fewer: the frame is not tested); a
-    feature whose transfer error $\|p_k - H_k p_{k-g}\|$ exceeds `threshold_px` is an
+    feature whose transfer error $\\|p_k - H_k p_{k-g}\\|$ exceeds `threshold_px` is an
     outlier (a feature sliding along an edge, a point off the plane, a false match) and is
     NaN from frame $k$ on, its `lost_reason` `"homography"`. A gap of several frames finds
     a slow drift that one frame would not.
