@@ -449,7 +449,7 @@ def test_refined_triangulation_equals_gtsam(triangulations):
     for p in triangulations:
         where = f"{p['name']} at {p['noise']} px"
         assert p["refined"].result._value == RESULTS.successful._value, where
-        codes = p["refined"].diagnostics._value[WINDOW - 1 :]
+        codes = p["refined"].diagnostics.codes._value[WINDOW - 1 :]
         assert np.all(codes == RESULTS.successful._value), where
         points = p["refined"].outputs.position[WINDOW - 1 :]
         for k, (P, ref, (point, cost, error_at)) in enumerate(zip(points, p["gtsam"], p["gtsam"])):

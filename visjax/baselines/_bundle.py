@@ -23,6 +23,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
+from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._results import RESULTS, all_finite, first_failure, raise_or_keep
@@ -30,17 +31,24 @@ from .._util import as_float, check_shape
 from ..estimators import AdaptiveOutput, Solution, StaticPointsEstimator, Stream
 from ..geometry import so3_exp, so3_log
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
+from ._losses import as_loss, covariance
 
 
 @final
 class BundleDiagnostics(eqx.Module):
     """Per fit (one for all frames, one per fit time for a sliding window): `rms_px` the
     RMS pixel residual over the seen features at the solution, `steps` the
-    Levenberg-Marquardt steps taken, `fit_ts` the time of the last frame in the fit."""
+    Levenberg-Marquardt steps taken, `fit_ts` the time of the last frame in the fit;
+    `omega_s_std` (F, n, 3) the standard deviation of each unknown feature's coordinates
+    and `cov` (F, p, p) the covariance of all the unknowns (`covariance`: in the order
+    intrinsics relative to $A_{11}$ (when fitted), features, mounting rotation vector,
+    mounting offset), from the fit's residuals (rescaled by the loss)."""
 
     rms_px: Float[Array, " F"]
     steps: Int[Array, " F"]
     fit_ts: Float[Array, " F"]
+    omega_s_std: Float[Array, "F n 3"]
+    cov: Float[Array, "F p p"]
 
 
 def _A_from(a):
@@ -111,13 +119,19 @@ def _check(estimator, stream, omega_c):
     return omega_c
 
 
-def _fit(y_init, args, solver, max_steps):
-    sol = optx.least_squares(_residuals, solver, y_init, args, max_steps=max_steps, throw=False)
+def _fit(y_init, args, solver, max_steps, loss):
+    def robust(y, a):
+        return loss(_residuals(y, a))  # each feature's pixel pair a block
+
+    sol = optx.least_squares(robust, solver, y_init, args, max_steps=max_steps, throw=False)
     r = _residuals(sol.value, args)
     R_b, x_b, _, _, vis_s, vis_c, _, frame_mask, _, _ = args
     seen = jnp.concatenate([vis_s, vis_c], axis=1) & frame_mask[:, None]
     count = jnp.maximum(jnp.sum(seen), 1).astype(r.dtype)
     rms = jnp.sqrt(jnp.sum(r**2) / (2.0 * count))
+    cov, _ = covariance(robust, sol.value, args, 2 * jnp.sum(seen))
+    _, unravel = ravel_pytree(sol.value)
+    std = unravel(jnp.sqrt(jnp.maximum(jnp.diag(cov), 0.0)))["omega_s"]
     in_front = jnp.all(_depths(sol.value, args) > 0.0)
     result = RESULTS.promote(sol.result)
     result = RESULTS.where(
@@ -129,7 +143,10 @@ def _fit(y_init, args, solver, max_steps):
             RESULTS.where(in_front, RESULTS.successful, RESULTS.behind_camera),
         ),
     )
-    return sol.value, result, rms, sol.stats["num_steps"]
+    result = RESULTS.where(
+        (result == RESULTS.successful) & ~loss.checks(), RESULTS.invalid_settings, result
+    )
+    return sol.value, result, rms, sol.stats["num_steps"], std, cov
 
 
 def bundle_adjustment(
@@ -140,6 +157,7 @@ def bundle_adjustment(
     window: int | None = None,
     every: int = 1,
     intrinsics: str = "fit",
+    loss=None,
     max_steps: int = 256,
     rtol: float = 1e-9,
     atol: float = 1e-9,
@@ -167,6 +185,10 @@ def bundle_adjustment(
         are held at the estimator's initial ones (its output's `A` at the first sample)
         and only the mounting and the unknown features are fitted; every output's `A` is
         that matrix.
+    - `loss`: `None` (least squares) or a robust `Loss` on each observation's pixel pair
+        (`huber(k)`, `cauchy(k)`, `k` in pixels): the fit is then the M-estimate, and an
+        outlier observation (a false match, a feature sliding along an edge) weighs in
+        less than quadratically.
     - `max_steps`, `rtol`, `atol`: of the Levenberg-Marquardt solver (its cost is
         $\\frac12\\sum r^2$ over the pixel residuals $r$).
     - `throw`: raise on failure (default), else report it in `Solution.result`.
@@ -188,6 +210,7 @@ def bundle_adjustment(
         raise ValueError(f"`every` must be a positive int; got {every!r}.")
     if intrinsics not in ("fit", "known"):
         raise ValueError(f'`intrinsics` must be "fit" or "known"; got {intrinsics!r}.')
+    loss = as_loss(loss)
 
     y0 = jax.tree_util.tree_map(lambda x: x[0], ys)
     init = _initial(estimator, y0)
@@ -224,12 +247,15 @@ def bundle_adjustment(
         R_b, x_b, p_s, p_c, vs, vc, keep = data
         clean_data = (clean(R_b), clean(x_b), clean(p_s), clean(p_c), vs, vc)
         args = (*clean_data, omega_c, keep, scale, a_known)
-        y, result, rms, steps = _fit(y_init, args, solver, max_steps)
+        y, result, rms, steps, std, cov = _fit(y_init, args, solver, max_steps, loss)
         result = RESULTS.where(bad, RESULTS.nonfinite_measurement, result)
         out = to_output(y)
         outputs = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n_frames,) + x.shape), out)
         failed = jnp.where(result == RESULTS.successful, -1, n_frames - 1)
-        diagnostics = BundleDiagnostics(rms_px=rms[None], steps=steps[None], fit_ts=stream.ts[-1:])
+        diagnostics = BundleDiagnostics(
+            rms_px=rms[None], steps=steps[None], fit_ts=stream.ts[-1:], omega_s_std=std[None],
+            cov=cov[None],
+        )  # fmt: skip
     else:
         W = min(window, n_frames)
 
@@ -253,19 +279,21 @@ def bundle_adjustment(
             sl = lambda x: jax.lax.dynamic_slice_in_dim(x, k, W)  # noqa: E731
             window_data = (sl(R_b), sl(x_b), sl(p_s), sl(p_c), sl(vs), sl(vc))
             args = (*window_data, omega_c, sl(keep), scale, a_known)
-            y, code, rms, steps = _fit(y_prev, args, solver, max_steps)
+            y, code, rms, steps, std, cov = _fit(y_prev, args, solver, max_steps, loss)
             code = RESULTS.where(seen_bad[k], RESULTS.nonfinite_measurement, code)
             result, failed = first_failure(result, failed, code, k)
             keep_y = failed < 0
             y_next = jax.tree_util.tree_map(lambda a, b: jnp.where(keep_y, a, b), y, y_prev)
-            return (y_next, result, failed), (y_next, rms, steps)
+            return (y_next, result, failed), (y_next, rms, steps, std, cov)
 
         init_carry = (y_init, RESULTS.successful, jnp.array(-1))
-        (_, result, failed), (y_fits, rms, steps) = jax.lax.scan(body, init_carry, ends)
+        (_, result, failed), (y_fits, rms, steps, std, cov) = jax.lax.scan(body, init_carry, ends)
         # the estimate at sample j: the last fit at or before j
         which = jnp.arange(n_frames) // every
         outputs = jax.vmap(to_output)(jax.tree_util.tree_map(lambda x: x[which], y_fits))
-        diagnostics = BundleDiagnostics(rms_px=rms, steps=steps, fit_ts=stream.ts[ends])
+        diagnostics = BundleDiagnostics(
+            rms_px=rms, steps=steps, fit_ts=stream.ts[ends], omega_s_std=std, cov=cov
+        )
     outputs = raise_or_keep(result, outputs, throw)
     return baseline_solution(stream.ts, outputs, result, failed, diagnostics)
 
@@ -348,6 +376,7 @@ def static_points_ekf(
     sigma_offset: float | ArrayLike = 0.05,
     sigma_feature: float | ArrayLike = 0.1,
     q_rate: float | ArrayLike = 1e-12,
+    gate: float | None = None,
     throw: bool = True,
 ) -> Solution:
     """An extended Kalman filter over the camera parameters and the unknown features, the
@@ -366,7 +395,9 @@ def static_points_ekf(
     stated as the uncertainty of a nominal camera: `sigma_focal` relative on the focal
     and skew terms (10%), `sigma_principal_px` on the principal point (30 px),
     `sigma_rotation` on the mounting rotation (0.1 rad), `sigma_offset` on the mounting
-    offset (5 cm), `sigma_feature` on each feature coordinate (10 cm).
+    offset (5 cm), `sigma_feature` on each feature coordinate (10 cm). `gate`: the
+    probability of the outlier gate on each feature's pixel pair (`ExtendedKalmanFilter`;
+    `None`, the default: no gate).
 
     **Returns:** a `Solution` like `bundle_adjustment`'s: `outputs` an `AdaptiveOutput`
     per sample (the filtered estimate after that sample), `result` (`diverged`: a feature
@@ -413,6 +444,8 @@ def static_points_ekf(
         x0,
         jnp.diag(sd**2),
         present=stream.present,
+        gate=gate,
+        gate_size=2,
         throw=False,
     )
     # a non-finite pose is an input of the filter's samples: the runner stops there with

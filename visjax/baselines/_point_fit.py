@@ -37,6 +37,9 @@ linear start refined by nonlinear least squares: Hartley and Zisserman, *Multipl
 Geometry in Computer Vision*, 2nd ed., sections 12.2 and 12.3).
 """
 
+from typing import final
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
@@ -47,6 +50,7 @@ from ..estimators import Solution, Stream, UIOOutput
 from ..geometry import skew, so3_exp
 from ..kinematics import perspective_dynamics
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
+from ._losses import as_loss, covariance
 
 
 def _left_jacobian(phi):
@@ -117,6 +121,15 @@ def _output(m):
     return UIOOutput(x_hat=x_hat, position=m)
 
 
+@final
+class TriangulationDiagnostics(eqx.Module):
+    """Per frame (window): `codes` its `RESULTS` code and `cov` (N, 3, 3) the covariance of
+    its point (the current camera frame's coordinates)."""
+
+    codes: RESULTS
+    cov: Float[Array, "N 3 3"]
+
+
 def triangulate_point(
     stream: Stream,
     *,
@@ -124,6 +137,7 @@ def triangulate_point(
     order: int = 0,
     rcond: float = 1e-9,
     refine: bool = False,
+    loss=None,
     max_steps: int = 64,
     rtol: float = 1e-8,
     atol: float = 1e-10,
@@ -143,18 +157,23 @@ def triangulate_point(
     from each window's linear solution, and return its minimiser, the maximum-likelihood
     point under isotropic pixel noise; `max_steps`, `rtol`, `atol` those of its solver
     (`optimistix.LevenbergMarquardt`; the residuals are normalised coordinates, the
-    unknowns in the units of the camera velocities), unused without `refine`; `throw` as
-    for the estimators.
+    unknowns in the units of the camera velocities), unused without `refine`; `loss`
+    (with `refine`): `None` (least squares) or a robust `Loss` on each frame's residual
+    pair (`huber(k)`, `cauchy(k)`, `k` in normalised coordinates: the pixel scale over the
+    focal length); `throw` as for the estimators.
 
     **Returns:** a `Solution` with `ts`, `outputs` a `UIOOutput` per frame (position in the
     current camera frame, in the units of the camera velocities; NaN during the warm-up,
     before the first window that determines a point in front of the camera), `result`
     (the first failure after the warm-up: a singular window, a refinement that failed (the
     solver's code promoted into `RESULTS`), a point behind the camera (the refined point
-    with `refine`), a non-finite measurement), `failed_sample`, and the code of every
-    window as `diagnostics`. Causal: the estimate at $t$ uses frames up to $t$ only.
-    Works under `jit`, `vmap` and `grad` (with `refine`, by the implicit function theorem
-    at each window's minimum).
+    with `refine`), a non-finite measurement), `failed_sample`, and as `diagnostics` a
+    `TriangulationDiagnostics`: every window's code and the covariance of its point
+    (`covariance`: of the refined point from the reprojection residuals; without
+    `refine`, of the linear solution from the linear system's residuals, which are the
+    reprojection residuals scaled by each frame's depth). Causal: the estimate at $t$
+    uses frames up to $t$ only. Works under `jit`, `vmap` and `grad` (with `refine`, by
+    the implicit function theorem at each window's minimum).
     """
     y, u = _check_stream(stream)
     if not (isinstance(window, int) and window >= 2):
@@ -168,6 +187,9 @@ def triangulate_point(
         )
     if not (isinstance(max_steps, int) and max_steps >= 1):
         raise ValueError(f"`max_steps` must be a positive int; got {max_steps!r}.")
+    if loss is not None and not refine:
+        raise ValueError("a robust `loss` applies to the refinement: pass `refine=True`.")
+    loss = as_loss(loss)
     ts = jnp.asarray(stream.ts)
     n = ts.shape[0]
     seen = jnp.all(jnp.isfinite(y), axis=1)
@@ -208,21 +230,23 @@ def triangulate_point(
         a = jnp.linalg.solve(Gs, (M.T @ b) / d) / d
         m = a[:3]  # P(0): the point at t_k in frame k
         refined = RESULTS.successful
+        count = 2 * jnp.sum(use)
+        # the linear solution's covariance (all three unknowns when order > 0: the point's
+        # block is the first 3 x 3)
+        cov_lin, _ = covariance(lambda a_, _: M @ a_ - b, a, None, count)
+        cov = cov_lin[:3, :3]
         if refine:
             # from the linear solution where it is a point in front of the camera (else
             # from one on the optical axis: the window's code says it failed anyway)
             start = determined & (m[2] > 0.0) & all_finite(m)
             m0 = jnp.where(start, m, jnp.array([0.0, 0.0, 1.0], m.dtype))
             data = (R_kj, c_kj, y_clean[idx], use)
-            sol = optx.least_squares(
-                lambda P, d: _reprojection(P, *d),
-                solver,
-                m0,
-                data,
-                max_steps=max_steps,
-                throw=False,
-            )
+            def robust(P, d):
+                return loss(_reprojection(P, *d))
+
+            sol = optx.least_squares(robust, solver, m0, data, max_steps=max_steps, throw=False)
             m, refined = sol.value, RESULTS.promote(sol.result)
+            cov, _ = covariance(robust, m, data, count)
         ok = determined & (refined == RESULTS.successful) & (m[2] > 0.0) & all_finite(m)
         code = RESULTS.where(
             ~determined,
@@ -235,9 +259,10 @@ def triangulate_point(
         )
         code = RESULTS.where(ok, RESULTS.successful, code)
         code = RESULTS.where(bad_input[k], RESULTS.nonfinite_measurement, code)
-        return _output(m), code
+        code = RESULTS.where(~loss.checks(), RESULTS.invalid_settings, code)
+        return _output(m), code, cov
 
-    outputs, codes = jax.vmap(fit)(jnp.arange(n))
+    outputs, codes, covs = jax.vmap(fit)(jnp.arange(n))
     # warm-up: until a window first gives a point (enough frames and camera translation
     # to determine it, in front of the camera) the estimate is NaN and that is not a
     # failure; after it, a window that does not (the camera stopped translating) is one,
@@ -256,7 +281,8 @@ def triangulate_point(
         lambda v: jnp.where(started.reshape((-1,) + (1,) * (v.ndim - 1)), v, jnp.nan), outputs
     )
     outputs = raise_or_keep(result, outputs, throw)
-    return baseline_solution(ts, outputs, result, failed, codes)
+    diagnostics = TriangulationDiagnostics(codes=codes, cov=covs)
+    return baseline_solution(ts, outputs, result, failed, diagnostics)
 
 
 def triangulation_residuals(
@@ -316,6 +342,7 @@ def moving_point_ekf(
     q_velocity: float,
     sigma_velocity0: float = 0.0,
     substeps: int = 1,
+    gate: float | None = None,
     throw: bool = True,
 ) -> Solution:
     """An extended Kalman filter of the point's inverse-depth coordinates and velocity (the
@@ -330,6 +357,8 @@ def moving_point_ekf(
     same depth guess as the observer (`depth0`, with `sigma_depth0`), $v_p = 0$ with
     `sigma_velocity0` (0: a static point expected); `q_velocity` from the expected change of
     the point's velocity (its largest acceleration squared times the sample interval).
+    `gate`: the probability of the outlier gate on each frame's measured $y$
+    (`ExtendedKalmanFilter`; `None`, the default: no gate).
 
     **Returns:** a `Solution` with `outputs` a `UIOOutput` per frame (after its update),
     `result` (`diverged`: the inverse depth not positive; `nonfinite_measurement`;
@@ -353,6 +382,8 @@ def moving_point_ekf(
         jnp.diag(sd**2) + 1e-18 * jnp.eye(6, dtype=dtype),
         present=stream.present,
         substeps=substeps,
+        gate=gate,
+        gate_size=2,
         throw=False,
     )
     # a non-finite camera velocity is an input of the filter's samples: the runner stops
