@@ -23,12 +23,12 @@ def scene():
     return sc, nath.initial_estimator(sc)
 
 
-def _ba(sc, est, noise, loss=None):
+def _ba(sc, est, noise, loss=None, reject_px=None):
     stream = static_points_stream(
         sc.ts, sc.R_b, sc.x_b, sc.p_s + noise[:, : sc.p_s.shape[1]],
         sc.p_c + noise[:, sc.p_s.shape[1] :], sc.omega_c,
     )  # fmt: skip
-    return bundle_adjustment(est, stream, sc.omega_c, loss=loss, throw=False)
+    return bundle_adjustment(est, stream, sc.omega_c, loss=loss, reject_px=reject_px, throw=False)
 
 
 def test_bundle_adjustment_covariance_predicts_the_spread(scene):
@@ -57,21 +57,27 @@ def test_robust_bundle_adjustment_on_tracks_with_outliers(scene):
     influence) cuts that by more than 5 times, and the Cauchy loss (scale 1 px: an
     influence that vanishes for large residuals) keeps the worst feature error within 2
     times the outlier-free least squares (measured over 5 seeds: 0.8-2.3 times, and 0.9-1.6
-    times the Cauchy fit's own outlier-free error)."""
+    times the Cauchy fit's own outlier-free error). The Cauchy fit followed by least
+    squares without the observations it puts beyond 3 px finds exactly the outliers and
+    is the fit told which they are (the observations left out, NaN)."""
     sc, est = scene
     n_s, n = sc.p_s.shape[1], sc.p_s.shape[1] + sc.p_c.shape[1]
     noise = NOISE * jax.random.normal(jax.random.key(1), (sc.ts.shape[0], n, 2))
     outliers = noise.at[10:23, 1].add(jnp.array([15.0, -9.0]))
 
     @eqx.filter_jit
-    def worst(noise, loss):
-        sol = _ba(sc, est, noise, loss)
-        return jnp.max(jnp.linalg.norm(sol.outputs.omega_s[-1] - sc.omega_s, axis=-1))
+    def worst(noise, loss, reject_px=None):
+        sol = _ba(sc, est, noise, loss, reject_px)
+        return jnp.max(jnp.linalg.norm(sol.outputs.omega_s[-1] - sc.omega_s, axis=-1)), sol
 
-    clean = float(worst(noise, None))
-    plain = float(worst(outliers, None))
-    bounded = float(worst(outliers, huber(1.0)))
-    redescending = float(worst(outliers, cauchy(1.0)))
+    clean = float(worst(noise, None)[0])
+    plain = float(worst(outliers, None)[0])
+    bounded = float(worst(outliers, huber(1.0))[0])
+    redescending = float(worst(outliers, cauchy(1.0))[0])
+    _, two_stage = worst(outliers, cauchy(1.0), 3.0)
+    _, told = worst(noise.at[10:23, 1].set(jnp.nan), None)
+    assert int(two_stage.diagnostics.rejected[0]) == 13
+    np.testing.assert_allclose(two_stage.outputs.omega_s[-1], told.outputs.omega_s[-1], rtol=1e-6)
     assert plain > 20.0 * clean, (clean, plain)
     assert bounded < plain / 5.0, (plain, bounded)
     assert redescending < 2.0 * clean, (clean, redescending)

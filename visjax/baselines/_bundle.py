@@ -42,13 +42,15 @@ class BundleDiagnostics(eqx.Module):
     `omega_s_std` (F, n, 3) the standard deviation of each unknown feature's coordinates
     and `cov` (F, p, p) the covariance of all the unknowns (`covariance`: in the order
     intrinsics relative to $A_{11}$ (when fitted), features, mounting rotation vector,
-    mounting offset), from the fit's residuals (rescaled by the loss)."""
+    mounting offset), from the fit's residuals (rescaled by the loss); `rejected` the
+    observations left out by `reject_px`."""
 
     rms_px: Float[Array, " F"]
     steps: Int[Array, " F"]
     fit_ts: Float[Array, " F"]
     omega_s_std: Float[Array, "F n 3"]
     cov: Float[Array, "F p p"]
+    rejected: Int[Array, " F"]
 
 
 def _A_from(a):
@@ -158,6 +160,7 @@ def bundle_adjustment(
     every: int = 1,
     intrinsics: str = "fit",
     loss=None,
+    reject_px: float | None = None,
     max_steps: int = 256,
     rtol: float = 1e-9,
     atol: float = 1e-9,
@@ -189,6 +192,10 @@ def bundle_adjustment(
         (`huber(k)`, `cauchy(k)`, `k` in pixels): the fit is then the M-estimate, and an
         outlier observation (a false match, a feature sliding along an edge) weighs in
         less than quadratically.
+    - `reject_px` (one fit over all frames only): after the fit, the observations whose
+        pixel residual exceeds it are left out and the fit is repeated by least squares
+        from that solution (with a robust `loss` first: a robust fit, then the efficient
+        least-squares fit of the observations it accepts).
     - `max_steps`, `rtol`, `atol`: of the Levenberg-Marquardt solver (its cost is
         $\\frac12\\sum r^2$ over the pixel residuals $r$).
     - `throw`: raise on failure (default), else report it in `Solution.result`.
@@ -211,6 +218,11 @@ def bundle_adjustment(
     if intrinsics not in ("fit", "known"):
         raise ValueError(f'`intrinsics` must be "fit" or "known"; got {intrinsics!r}.')
     loss = as_loss(loss)
+    if reject_px is not None:
+        if window is not None:
+            raise ValueError("`reject_px` applies to the one fit over all frames (`window=None`).")
+        if not (isinstance(reject_px, (int, float)) and reject_px > 0):
+            raise ValueError(f"`reject_px` must be a positive number of pixels; got {reject_px!r}.")
 
     y0 = jax.tree_util.tree_map(lambda x: x[0], ys)
     init = _initial(estimator, y0)
@@ -248,13 +260,24 @@ def bundle_adjustment(
         clean_data = (clean(R_b), clean(x_b), clean(p_s), clean(p_c), vs, vc)
         args = (*clean_data, omega_c, keep, scale, a_known)
         y, result, rms, steps, std, cov = _fit(y_init, args, solver, max_steps, loss)
+        rejected = jnp.zeros((), int)
+        if reject_px is not None:
+            # leave out the observations the robust fit puts further than `reject_px`,
+            # then least squares on the rest from the robust solution
+            far = jnp.linalg.norm(_residuals(y, args), axis=-1) > reject_px
+            n_s = vs.shape[1]
+            args = (*clean_data[:4], vs & ~far[:, :n_s], vc & ~far[:, n_s:], *args[6:])
+            y2, result2, rms, steps2, std, cov = _fit(y, args, solver, max_steps, as_loss(None))
+            result = RESULTS.where(result == RESULTS.successful, result2, result)
+            y, steps = y2, steps + steps2
+            rejected = jnp.sum(far & jnp.concatenate([vs, vc], axis=1))
         result = RESULTS.where(bad, RESULTS.nonfinite_measurement, result)
         out = to_output(y)
         outputs = jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n_frames,) + x.shape), out)
         failed = jnp.where(result == RESULTS.successful, -1, n_frames - 1)
         diagnostics = BundleDiagnostics(
             rms_px=rms[None], steps=steps[None], fit_ts=stream.ts[-1:], omega_s_std=std[None],
-            cov=cov[None],
+            cov=cov[None], rejected=rejected[None],
         )  # fmt: skip
     else:
         W = min(window, n_frames)
@@ -292,8 +315,9 @@ def bundle_adjustment(
         which = jnp.arange(n_frames) // every
         outputs = jax.vmap(to_output)(jax.tree_util.tree_map(lambda x: x[which], y_fits))
         diagnostics = BundleDiagnostics(
-            rms_px=rms, steps=steps, fit_ts=stream.ts[ends], omega_s_std=std, cov=cov
-        )
+            rms_px=rms, steps=steps, fit_ts=stream.ts[ends], omega_s_std=std, cov=cov,
+            rejected=jnp.zeros(ends.shape, int),
+        )  # fmt: skip
     outputs = raise_or_keep(result, outputs, throw)
     return baseline_solution(stream.ts, outputs, result, failed, diagnostics)
 
