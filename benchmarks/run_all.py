@@ -210,6 +210,39 @@ def table(results: dict) -> str:
                 _met(row["ns_per_trajectory_step"] <= 10) if row["batch"] == 1024 else "-",
             )
         )
+    vg = r.get("vs_gtsam", {})
+    if "batch_speedup_vs_gtsam_loop" in vg:
+        b = vg["batch"]
+        rows.append(
+            (
+                f"bundle adjustment (Nath et al.'s scene), {b['gtsam_problems_solved']:,} noisy"
+                " problems, `vmap`",
+                f"{_fmt(1e3 * b['visjax_s_per_problem'])} ms/problem",
+                f"GTSAM's Levenberg-Marquardt, a loop {_fmt(1e3 * b['gtsam_s_per_problem'])}"
+                f" ms/problem; solutions equal to {vg['max_rel_diff_vs_gtsam']:.1e}",
+                f"{_fmt(vg['batch_speedup_vs_gtsam_loop'])}x faster",
+                "(reported)",
+                "-",
+            )
+        )
+    rh = r.get("robust_homography", {})
+    for f in rh.get("fractions", []):
+        if f["outlier_fraction"] not in (0.0, 0.4):
+            continue
+        v, cv = f["visjax"], f["opencv_ransac"]
+        rows.append(
+            (
+                f"RANSAC homography, {rh['points']} points, {f['outlier_fraction']:.0%} outliers"
+                f" (`find_homography_robust`, {rh['visjax_iterations']} hypotheses)",
+                f"{_fmt(v['us_per_frame'])} µs/frame, corner error "
+                f"{_fmt(v['corner_error_px_median'])} px",
+                f"OpenCV RANSAC {_fmt(cv['us_per_frame'])} µs/frame, "
+                f"{_fmt(cv['corner_error_px_median'])} px",
+                f"{_fmt(cv['opencv_over_visjax'])}x",
+                "(reported)",
+                "-",
+            )
+        )
     c = r.get("compile_times", {})
     for row in c.get("results", []):
         rows.append(

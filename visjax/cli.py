@@ -131,6 +131,8 @@ def _verb(sub, name, help, *, seeds, noise, grid):
     _arg(p, "--duration", _positive, None, "seconds of the problem's scene")
     _arg(p, "--rate", _positive, None, "sample rate of the scene, Hz (if it has one)")
     _arg(p, "--set", None, None, "a variant (moving_point: I.1 ... II.3)", action="append")
+    robust = "the problem's robust settings (static_points: robust losses, an outlier gate)"
+    _arg(p, "--robust", help=robust, action="store_true")
     if grid:
         _arg(p, "--grid", _grid_spec, None, 'e.g. "K_scale=1e-2:1e1:8,rho_scale=0.1/1"')
         _arg(p, "--chunk", _count, 64, "runs per vmap call (default 64)")
@@ -265,7 +267,7 @@ def _check(a) -> None:
         for module in a.modules or ():
             importlib.import_module(module)
         try:  # the problem's name, options and variants, before any work
-            registered(a.problem).check(a.data, a.duration, a.rate, a.set)
+            registered(a.problem).check(a.data, a.duration, a.rate, a.set, a.robust)
         except ValueError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
     from .io import check_output_path

@@ -37,21 +37,25 @@ def _settings(arguments: dict) -> dict:
 
 
 @functools.lru_cache(maxsize=16)
-def _built(name, data, stamp, noise, duration, rate, variant):
+def _built(name, data, stamp, noise, duration, rate, variant, robust=False):
     """A problem, cached per process (a data file by its path and modification time): a
     `tune` after a `sweep` of the same problem reuses its set-up and compiled runs."""
     from .studies import registered
 
     return registered(name).make(
-        data=data, noise_px=noise, duration=duration, rate_hz=rate, variant=variant
-    )
+        data=data, noise_px=noise, duration=duration, rate_hz=rate, variant=variant,
+        robust=True if robust else None,
+    )  # fmt: skip
 
 
-def problems(name, data=None, noise=0.1, duration=None, rate=None, variants=None, every=True):
+def problems(
+    name, data=None, noise=0.1, duration=None, rate=None, variants=None, every=True, robust=False
+):
     """`[(tag, problem)]`: the registered problem `name` once (tag `None`), or, for a
     problem with named variants, once per variant (`variants`, default all of them when
-    `every`, else the problem's default). **Raises:** `ValueError` for an unknown problem,
-    variant or option."""
+    `every`, else the problem's default); `robust`: the problem's robust settings (its
+    builder's `robust=True`). **Raises:** `ValueError` for an unknown problem, variant or
+    option (a problem without robust settings takes no `--robust`)."""
     from .studies import registered
 
     entry = registered(name)
@@ -59,7 +63,7 @@ def problems(name, data=None, noise=0.1, duration=None, rate=None, variants=None
     data = None if data is None else str(data)
 
     def build(variant):
-        return _built(entry.name, data, stamp, noise, duration, rate, variant)
+        return _built(entry.name, data, stamp, noise, duration, rate, variant, robust)
 
     entry.check(data, duration, rate, variants)
     if variants:
@@ -97,6 +101,7 @@ def run_command(
     duration: float | None = None,
     rate: float | None = None,
     variants=None,
+    robust: bool = False,
     out=None,
     quiet: bool = False,
     formats=("png",),
@@ -114,7 +119,9 @@ def run_command(
     from .studies import as_json, solution
 
     results = {}
-    for tag, p in problems(problem, data, noise, duration, rate, variants, every=False):
+    for tag, p in problems(
+        problem, data, noise, duration, rate, variants, every=False, robust=robust
+    ):
         m = p.check_method(method)
         sol = jax.block_until_ready(solution(p, None, seed, method=m))
         code = result_names(sol.result)
@@ -177,6 +184,7 @@ def compare_command(
     formats=("png",),
     rate: float | None = None,
     variants=None,
+    robust: bool = False,
 ) -> dict:
     """`visjax compare PROBLEM`: every method of the problem (the estimator, its batch
     baselines, its EKF) on identical noisy inputs (`visjax.studies.compare`, noise seeds
@@ -194,7 +202,9 @@ def compare_command(
     from .plots import plot_comparison
 
     results = {}
-    for tag, p in problems(problem, data, noise, duration, rate, variants, every=False):
+    for tag, p in problems(
+        problem, data, noise, duration, rate, variants, every=False, robust=robust
+    ):
         records = studies.compare(p, seeds=seeds, first_seed=seed, progress=not quiet)
         body = {
             "problem": problem,
@@ -457,6 +467,7 @@ def sweep_command(
     duration: float | None = None,
     rate: float | None = None,
     variants=None,
+    robust: bool = False,
     chunk: int = 64,
     shard=False,
     out=None,
@@ -499,7 +510,7 @@ def sweep_command(
     try:
         return _sweeps(
             problem, grid, noise, seeds, data, duration, rate, variants, chunk, out, quiet,
-            seed, formats, resume, force, devices, job, executor, settings, started,
+            seed, formats, resume, force, devices, job, executor, settings, started, robust,
         )  # fmt: skip
     finally:
         if executor is not None:
@@ -508,14 +519,14 @@ def sweep_command(
 
 def _sweeps(
     problem, grid, noise, seeds, data, duration, rate, variants, chunk, out, quiet, seed,
-    formats, resume, force, devices, job, executor, settings, started,
+    formats, resume, force, devices, job, executor, settings, started, robust=False,
 ):  # fmt: skip
     from . import studies
     from .plots import plot_sweep
 
     say = None if quiet else print
     results, mesh = {}, _mesh(devices)
-    for tag, p in problems(problem, data, noise, duration, rate, variants):
+    for tag, p in problems(problem, data, noise, duration, rate, variants, robust=robust):
         if not p.scored:
             raise ValueError(f"{p.title}: a sweep needs the truth (the data file has none)")
         folder = _folder(out, tag)
@@ -657,6 +668,7 @@ def tune_command(
     duration: float | None = None,
     rate: float | None = None,
     variants=None,
+    robust: bool = False,
     chunk: int = 64,
     shard=False,
     out=None,
@@ -684,7 +696,7 @@ def tune_command(
     if job is not None:
         raise ValueError("--shard i/N is for sweep (tune follows one path: it needs every run)")
     results, mesh = {}, _mesh(devices)
-    for tag, p in problems(problem, data, noise, duration, rate, variants):
+    for tag, p in problems(problem, data, noise, duration, rate, variants, robust=robust):
         if not p.scored:
             raise ValueError(f"{p.title}: tuning needs the truth (the data file has none)")
         spec, table, summary, best = _one_sweep(p, grid, seeds, chunk, mesh, quiet, seed)

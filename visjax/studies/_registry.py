@@ -36,14 +36,14 @@ class Registered:
             return {"*"}
         return {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
 
-    def check(self, data=None, duration=None, rate_hz=None, variants=None) -> None:
+    def check(self, data=None, duration=None, rate_hz=None, variants=None, robust=False) -> None:
         """The command line's options for this problem, checked before any work: a
-        `ValueError` names an option it does not take, an unknown variant, or a scene's
-        option given with a data file."""
+        `ValueError` names an option it does not take (`robust`: its builder's `robust`
+        option), an unknown variant, or a scene's option given with a data file."""
         if data is not None and (duration is not None or rate_hz is not None):
             raise ValueError("--duration and --rate apply to the problem's scene, not to --data")
         accepted = self.options()
-        given = {"data": data, "duration": duration, "rate_hz": rate_hz}
+        given = {"data": data, "duration": duration, "rate_hz": rate_hz, "robust": robust or None}
         for option, value in given.items():
             if value is not None and "*" not in accepted and option not in accepted:
                 raise ValueError(f"problem {self.name!r} takes no --{option.removesuffix('_hz')}")
