@@ -117,15 +117,24 @@ def _transfer(G, p_ref, p_cur):
 
 
 def fuzz_reconstruction(n, seed, dtype):
+    import jax
     import numpy as np
 
     from visjax import RESULTS
-    from visjax.geometry import euclidean_reconstruction
+    from visjax.geometry import euclidean_reconstruction, find_homography_robust
     from visjax.geometry._homography import _find_homography_checked
 
     tol = 1e-6 if dtype == "float64" else 1e-3
     f = _vm(lambda a, b, c, d: euclidean_reconstruction(a, b, c, d, throw=False))
     g = _vm(_find_homography_checked)
+
+    def robust(a, b):
+        r = find_homography_robust(
+            jax.random.key(0), a, b, iterations=16, threshold_px=3.0, throw=False
+        )
+        return r.H, r.result
+
+    h = _vm(robust)
     out = {}
     for kind in KINDS:
         sc, p_ref, p_cur, A = _scenes(n, seed, kind, dtype)
@@ -159,6 +168,15 @@ def fuzz_reconstruction(n, seed, dtype):
             okg, finite_g, _transfer(G, p_ref, p_cur), 1e-6 if dtype == "float64" else 5e-2, c
         )
         out.setdefault("find_homography", {})[kind] = c
+        # the robust homography from the same four correspondences: exact where they fix
+        # one; near-degenerate, its contract is the inlier threshold (3 px)
+        H, r = h(p_ref, p_cur)
+        okh = np.asarray(r._value) == int(RESULTS.successful._value)
+        c = _counts()
+        tol_h = 3.0 if kind == "near_degenerate" else (1e-6 if dtype == "float64" else 5e-2)
+        finite_h = np.all(np.isfinite(np.asarray(H)), (1, 2))
+        _classify(okh, finite_h, _transfer(H, p_ref, p_cur), tol_h, c)
+        out.setdefault("find_homography_robust", {})[kind] = c
     return out
 
 

@@ -175,6 +175,7 @@ def test_bad_arguments(constant, no_jaxtyping):
         velocity_smoother(sc.ts, *args, bandwidth_hz=0.0)
 
 
+@pytest.mark.slow  # the unit tier's time: a velocity compile or 200 fits
 def test_ekf_gate_rejects_outlier_pixels(constant):
     """Three features' pixels thrown 30 px off at a few frames: with the gate the filter
     equals the one told that those pixels are missing (NaN), to 1e-10; without, it does

@@ -31,6 +31,7 @@ def _ba(sc, est, noise, loss=None, reject_px=None):
     return bundle_adjustment(est, stream, sc.omega_c, loss=loss, reject_px=reject_px, throw=False)
 
 
+@pytest.mark.slow  # the unit tier's time: a velocity compile or 200 fits
 def test_bundle_adjustment_covariance_predicts_the_spread(scene):
     """Each unknown feature coordinate's predicted standard deviation (the root of the
     mean predicted variance over the seeds) is within 20% of the spread of the 200 fits."""
@@ -98,6 +99,7 @@ def moving_camera():
     return ts, u, y, m
 
 
+@pytest.mark.slow  # the unit tier's time: a velocity compile or 200 fits
 def test_triangulation_covariance_predicts_the_spread(moving_camera):
     ts, u, y, m = moving_camera
     K = jnp.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])

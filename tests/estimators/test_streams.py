@@ -125,6 +125,7 @@ def _equal(a, b, rtol=1e-12):
         np.testing.assert_allclose(x, y, rtol=rtol, atol=1e-12)
 
 
+@pytest.mark.slow  # the unit tier's time: a velocity compile or 200 fits
 def test_velocity_stream_reject(no_jaxtyping):
     sc = chitrakaran.section6_scenario(0.3, 1000.0)
     pixels = np.asarray(sc.pixels).copy()

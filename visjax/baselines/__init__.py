@@ -25,6 +25,7 @@ from ._losses import (
 )
 from ._opencv import opencv_reconstruction as opencv_reconstruction
 from ._point_fit import (
+    TriangulationDiagnostics as TriangulationDiagnostics,
     camera_poses as camera_poses,
     moving_point_ekf as moving_point_ekf,
     triangulate_point as triangulate_point,
