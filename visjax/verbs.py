@@ -192,7 +192,8 @@ def compare_command(
     on top of its pixels). Writes `summary.json` (kind `compare`: `records`, one per method
     and seed, and `problem_settings`), `records.parquet`, `records.csv` and
     `comparison.<format>` (accuracy and latency with their spread over seeds), and prints
-    the medians per method."""
+    the medians per method (and the predicted standard deviation where the problem has
+    one, `AbstractProblem.uncertainty`)."""
     started = time.perf_counter()
     settings = _settings(locals())
     command_x64()
@@ -217,14 +218,25 @@ def compare_command(
         head = f"[{tag}] " if tag else ""
         label = p.label or p.metric
         print(f"{head}{p.title}: {seeds} noise seed(s); {p.metric}: {label}")
-        print(f"{'method':<14}{'failed':>8}{p.metric + ' (median)':>24}{'latency/sample (s)':>20}")
+        # the problem's predicted spread (`uncertainty`: keys `<metric>_std`), if any
+        std_key = next((k for k in records[0] if k.endswith("_std")), None)
+        std_head = f"{'predicted ' + std_key:>28}" if std_key else ""
+        print(
+            f"{'method':<14}{'failed':>8}{p.metric + ' (median)':>24}{std_head}"
+            f"{'latency/sample (s)':>20}"
+        )
         for m in p.methods:
             rows = [r for r in records if r["method"] == m]
             good = [r[p.metric] for r in rows if r["result"] == "successful" and r[p.metric]]
             acc = f"{np.median(good):.4g}" if good else "-"
             lat = float(np.median([r["latency_s_per_sample"] for r in rows]))
             failed = sum(r["result"] != "successful" for r in rows)
-            print(f"{m:<14}{failed:>8}{acc:>24}{lat:>20.3g}")
+            std = ""
+            if std_key:
+                worst = [_worst(r[std_key]) for r in rows]
+                worst = [w for w in worst if w is not None]
+                std = f"{np.median(worst):>28.4g}" if worst else f"{'-':>28}"
+            print(f"{m:<14}{failed:>8}{acc:>24}{std}{lat:>20.3g}")
         folder = _folder(out, tag)
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
@@ -249,6 +261,13 @@ def compare_command(
     if list(results) == [None]:
         return results[None]
     return _result(results, settings, seed, started, out)
+
+
+def _worst(value):
+    """The largest finite number of a JSON value (a number, a nested list, `None`)."""
+    flat = np.asarray(value if value is not None else np.nan, dtype=object).ravel()
+    finite = [float(v) for v in flat if v is not None and np.isfinite(float(v))]
+    return max(finite) if finite else None
 
 
 def _mesh(shard: bool):

@@ -340,6 +340,7 @@ def _check_static(rows):
             assert 0.3 < 2 * ref["cost"] / (2 * seen * p["noise"] ** 2) < 1.2, (where, ref["cost"])
 
 
+@pytest.mark.slow  # the unit tier's time: the calibrated case stays there
 def test_uncalibrated_static_points_equal_gtsam(uncalibrated):
     """Intrinsics, mounting and unknown features equal GTSAM's to 1e-6 relative, and the
     costs agree, on three scenes at 0, 0.5 and 1 px; noise-free both find the truth."""

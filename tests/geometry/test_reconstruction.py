@@ -84,6 +84,7 @@ def _flat_known(p_cur, p_ref, A, n_star):
 _jacobians = {f: jax.jit(jax.jacrev(f)) for f in (_flat_general, _flat_known)}
 
 
+@pytest.mark.slow  # unit tier's time: the test at the identity checks both paths too
 def test_gradient_matches_finite_differences(scenes):
     p_ref, p_cur, A, prior = scenes.p_ref[5], scenes.p_cur[5], scenes.A[5], scenes.n_star[5]
     for f, jac in _jacobians.items():

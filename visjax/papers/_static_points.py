@@ -26,7 +26,9 @@ class FinalEstimate(eqx.Module):
     `omega_s` (n, 3) the final estimate of the unknown features' world positions, and,
     when asked for (`outputs=True`), `ts` and `outputs` (the method's saved outputs) and,
     for the estimator, `diagnostics` (its saved `StaticPointsDiagnostics`: prediction
-    errors, depths, the information rate, $\\lambda_{\\min}(\\Gamma_c)$, resets)."""
+    errors, depths, the information rate, $\\lambda_{\\min}(\\Gamma_c)$, resets);
+    `omega_s_std` (n, 3) the standard deviation of `omega_s` the method predicts (a bundle
+    adjustment's covariance, the EKF's final covariance; NaN for the estimator)."""
 
     result: Any
     failed_sample: Any
@@ -34,6 +36,7 @@ class FinalEstimate(eqx.Module):
     ts: Any = None
     outputs: Any = None
     diagnostics: Any = None
+    omega_s_std: Any = None
 
 
 class StaticPointsProblem(AbstractProblem):
@@ -147,6 +150,7 @@ class StaticPointsProblem(AbstractProblem):
             )
             last = jax.tree_util.tree_map(lambda x: x[-1], stream.ys)
             omega_s = est.output(self.ts[-1], sol.final_state, last).omega_s
+            std = jnp.full_like(omega_s, jnp.nan)
         elif method in ("batch", "batch_window"):
             window = {} if method == "batch" else {"window": self.window_frames}
             if method == "batch_window":
@@ -157,12 +161,16 @@ class StaticPointsProblem(AbstractProblem):
                     window["reject_px"] = ROBUST_REJECT_PX
             sol = bundle_adjustment(est, stream, self.omega_c, throw=False, **window)
             omega_s = sol.outputs.omega_s[-1]
+            std = sol.diagnostics.omega_s_std[-1]
         elif method == "ekf":
             sol = static_points_ekf(
                 est, stream, self.omega_c, r_px=max(self.noise_px, 0.05),
                 gate=ROBUST_GATE if self.robust else None, throw=False,
             )  # fmt: skip
             omega_s = sol.outputs.omega_s[-1]
+            # the state ends with the features (static_points_ekf)
+            var = jnp.diagonal(sol.diagnostics[-1])[-omega_s.size :]
+            std = jnp.sqrt(jnp.maximum(var, 0.0)).reshape(omega_s.shape)
         else:
             raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
         return FinalEstimate(
@@ -172,6 +180,7 @@ class StaticPointsProblem(AbstractProblem):
             sol.ts if outputs else None,
             sol.outputs if outputs else None,
             getattr(sol, "diagnostics", None) if outputs else None,
+            std,
         )
 
     def metrics(self, method, solution):
@@ -179,6 +188,14 @@ class StaticPointsProblem(AbstractProblem):
             return {}
         error = jnp.linalg.norm(solution.omega_s - self.truth, axis=-1)
         return {"error_worst": jnp.max(error), "error": error}
+
+    def uncertainty(self, method, solution):
+        """`error_std` (n,): each unknown feature's predicted RMS position error,
+        $\\sqrt{\\operatorname{tr} C_i}$ of its covariance (the bundle adjustments'
+        $\\hat\\sigma^2(J^TJ)^{-1}$, the EKF's final covariance); NaN for the estimator."""
+        if self.truth is None:
+            return {}
+        return {"error_std": jnp.sqrt(jnp.sum(solution.omega_s_std**2, axis=-1))}
 
     def updates(self, method):
         n = int(self.ts.shape[0])

@@ -67,7 +67,13 @@ from ..estimators import (
     rejected_samples,
     run,
 )
-from ..geometry import euclidean_reconstruction, pixel_to_normalized, skew, sl3_normalize
+from ..geometry import (
+    euclidean_reconstruction,
+    find_homography_robust,
+    pixel_to_normalized,
+    skew,
+    sl3_normalize,
+)
 from ..studies import AbstractProblem, Parameter
 
 
@@ -361,6 +367,10 @@ def ransac_homographies(
     )
 
 
+ROBUST_ITERATIONS = 200  # RANSAC hypotheses per frame of the robust `dlt` (8 points)
+ROBUST_THRESHOLD_PX = 3.0  # its inlier threshold, as the OpenCV `ransac` baseline's
+
+
 def _to_observer_convention(G, K):
     """A projective homography `G` (reference to current pixels) as the observer's
     Euclidean one, current to reference bearings, in SL(3): $(K^{-1} G K)^{-1}$."""
@@ -373,8 +383,10 @@ class HomographyProblem(AbstractProblem):
     the observer of Hamel et al. with the group velocity measured (`estimator`) or only
     the camera's angular velocity (`gyro`, the rest by the integral term), against
     per-frame homographies: the four-point DLT of the target's corners (`dlt`,
-    `visjax.geometry.euclidean_reconstruction`'s $G_n$) and OpenCV's `findHomography`
-    with RANSAC on all eight points (`ransac`, 3 px threshold). Each draw adds `noise_px`
+    `visjax.geometry.euclidean_reconstruction`'s $G_n$; with `robust`, the command line's
+    `--robust`: visjax's RANSAC and Huber-reweighted DLT on all eight points,
+    `visjax.geometry.find_homography_robust`, 3 px) and OpenCV's `findHomography` with
+    RANSAC on all eight points (`ransac`, 3 px threshold). Each draw adds `noise_px`
     of Gaussian noise to the current and to the reference pixels. The observer starts at
     the identity (the truth is 0.3 away).
 
@@ -390,6 +402,7 @@ class HomographyProblem(AbstractProblem):
 
     scene: HomographyScene
     noise_px: float = eqx.field(static=True, default=0.0)
+    robust: bool = eqx.field(static=True, default=False)
 
     def parameters(self):
         return {
@@ -403,7 +416,12 @@ class HomographyProblem(AbstractProblem):
             "samples": int(self.scene.ts.shape[0]),
             "points": int(self.scene.reference.shape[0]),
             "ransac_threshold_px": 3.0,
-            "dlt_points": "the four corners",
+            "dlt_points": (
+                f"all points: find_homography_robust ({ROBUST_ITERATIONS} RANSAC hypotheses, "
+                f"{ROBUST_THRESHOLD_PX:g} px, then Huber-reweighted DLT)"
+                if self.robust
+                else "the four corners"
+            ),
             "per_run": "pixel noise on the current and the reference images",
         }
 
@@ -426,7 +444,20 @@ class HomographyProblem(AbstractProblem):
             )
             stream = homography_stream(sc.ts, pixels, A, sc.K, throw=False)
             return run(observer, stream, throw=False)
-        if method == "dlt":
+        if method == "dlt" and self.robust:
+            keys = jax.random.split(jax.random.key(0), pixels.shape[0])
+
+            def one(key, p):
+                fit = find_homography_robust(
+                    key, reference, p, iterations=ROBUST_ITERATIONS,
+                    threshold_px=ROBUST_THRESHOLD_PX, throw=False,
+                )  # fmt: skip
+                return fit.H, fit.result
+
+            G, results = jax.vmap(one)(keys, pixels)
+            G = jnp.where((results == RESULTS.successful)[:, None, None], G, jnp.nan)
+            result = _first_failure_over(results)
+        elif method == "dlt":
 
             def one(p):
                 rec = euclidean_reconstruction(reference[:4], p[:4], sc.K, throw=False)
@@ -561,18 +592,22 @@ def homography_problem(
     duration: float | None = None,
     rate_hz: float = 1000.0,
     variant: str | None = None,
+    robust: bool = False,
 ) -> HomographyProblem | VelocityFrontEndProblem:
     """The `homography` problem: `variant` (`--set`) `"tracking"` (default;
     `HomographyProblem` on `homography_scene(duration, rate_hz)`, 2 s by default) or
     `"velocity_front_end"` (`VelocityFrontEndProblem` on the velocity problem of
     Chitrakaran et al., its section-6 simulation, 10 s by default), with `noise_px` of
-    Gaussian pixel noise per draw."""
+    Gaussian pixel noise per draw. `robust` (tracking only): the `dlt` baseline robust to
+    outlier points (`HomographyProblem`)."""
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
     variant = variant or "tracking"
     if variant == "tracking":
         scene = homography_scene(2.0 if duration is None else duration, rate_hz)
-        return HomographyProblem(scene=scene, noise_px=float(noise_px))
+        return HomographyProblem(scene=scene, noise_px=float(noise_px), robust=bool(robust))
+    if robust:
+        raise ValueError('--robust applies to the variant "tracking" only')
     if variant == "velocity_front_end":
         from . import velocity_problem
 

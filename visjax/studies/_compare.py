@@ -30,7 +30,8 @@ def compare(
     `compare(problem, seeds=..., params=...)`: every method of an `AbstractProblem`
     (its estimator and baselines, `params` overriding the defaults) on the problem's
     noisy inputs, scored by its `metrics` (as JSON numbers; `None` for a failed run), with
-    the problem's `updates`. Or, without a problem, the functional form below.
+    the problem's `uncertainty` beside them (`None` where a method predicts none) and its
+    `updates`. Or, without a problem, the functional form below.
 
     **Arguments:**
 
@@ -70,7 +71,8 @@ def compare(
             ok = bool(sol.result == RESULTS.successful)
             values = jax.tree_util.tree_map(np.asarray, problem.metrics(name, sol))
             ok = ok and all(np.all(np.isfinite(v)) for v in values.values())
-            return as_json(values, ok)
+            spread = jax.tree_util.tree_map(np.asarray, problem.uncertainty(name, sol))
+            return {**as_json(values, ok), **as_json(spread, ok, nullable=True)}
 
         return compare(
             method_runs(problem, params),

@@ -78,7 +78,9 @@ class AbstractProblem(eqx.Module):
     parameters are multipliers, the absolute gains); `checks(params)` (extra checks of a
     chosen point, e.g. a stability certificate, JSON-able, merged into the sweep's and
     tune's summaries) and `check_lines(summary)` (them, as printed lines);
-    `figure(method, solution)` (a matplotlib figure of one solution against the truth); and
+    `uncertainty(method, solution)` (the predicted standard deviations of what the metrics
+    score, from a batch method's covariance; `compare` reports them); `figure(method,
+    solution)` (a matplotlib figure of one solution against the truth); and
     `defaults_label` (what printed reports and figures call the default parameters:
     `"paper"` where they are a paper's published gains, else e.g. `"defaults"`; the
     summaries' JSON key stays `paper`).
@@ -128,6 +130,15 @@ class AbstractProblem(eqx.Module):
 
     def check_lines(self, summary: Mapping[str, Any]) -> list[str]:
         return []
+
+    def uncertainty(self, method: str, solution) -> dict[str, jax.Array]:
+        """Name -> array: the standard deviation of the estimate that the metrics score, as
+        the method predicts it (a batch fit's covariance, $\\hat\\sigma^2(J^TJ)^{-1}$,
+        propagated to the scored quantity), named `<metric>_std` after the metric whose
+        spread it predicts; the same names for every method, NaN where a method predicts
+        none (an observer). `compare` reports them beside the metrics
+        (`None` where NaN). Default: none."""
+        return {}
 
     def figure(self, method: str, solution):
         """A figure of one solution (made with `outputs=True`): each saved output field
@@ -388,13 +399,22 @@ def method_runs(problem: AbstractProblem, params=None) -> dict:
     return {m: make(m) for m in problem.methods}
 
 
-def as_json(values: Mapping[str, Any], ok: bool) -> dict:
+def as_json(values: Mapping[str, Any], ok: bool, nullable: bool = False) -> dict:
     """Metrics as JSON-able numbers (a float, or a list for an array); `None` if the run
-    failed."""
+    failed, and (`nullable`) in place of each NaN."""
+
+    def number(x):
+        return None if nullable and not np.isfinite(x) else float(x)
+
     out = {}
     for name, v in values.items():
         a = np.asarray(v, float)
-        out[name] = None if not ok else (float(a) if a.ndim == 0 else a.tolist())
+        if not ok:
+            out[name] = None
+        else:
+            out[name] = (
+                number(a) if a.ndim == 0 else np.vectorize(number, otypes=[object])(a).tolist()
+            )
     return out
 
 
