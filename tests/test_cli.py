@@ -324,7 +324,7 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
     bad = dict(np.load(path))
     del bad["A"]
     np.savez(tmp_path / "bad.npz", **bad)
-    assert main(["velocity", "--data", str(tmp_path / "bad.npz"), "--quiet"]) == 1
+    assert main(["velocity", "--data", str(tmp_path / "bad.npz"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("visjax: error:") and "'A'" in err and err.count("\n") == 1
     with pytest.raises(SystemExit):

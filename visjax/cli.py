@@ -3,6 +3,7 @@
 registered problem)."""
 
 import argparse
+import contextlib
 import importlib
 import inspect
 import math
@@ -100,6 +101,9 @@ def _arg(p, flag, kind=None, default=None, help=None, **kw):
     p.add_argument(flag, help=help, **kw)
 
 
+_FORCE = "replace another command's results in --out (a sweep: a finished one)"
+
+
 def _common(p, out=_OUT, noise=None, seed=None, seeds=None, data=None, fmt=True):
     """The shared vocabulary: --noise, --seed, --seeds, --data, --out, --quiet, --format."""
     if noise is not None:
@@ -111,6 +115,7 @@ def _common(p, out=_OUT, noise=None, seed=None, seeds=None, data=None, fmt=True)
     if data is not None:
         _arg(p, "--data", str, None, data)
     _arg(p, "--out", str, None, f"folder for {out}")
+    _arg(p, "--force", help=_FORCE, action="store_true")
     _arg(p, "--quiet", help="no progress bars", action="store_true")
     if fmt:
         _arg(p, "--format", _formats, ["png"], "figure formats: png,pdf,svg (default png)")
@@ -180,12 +185,12 @@ def build_parser() -> argparse.ArgumentParser:
     help = "a grid of a problem's parameters over noise seeds"
     sw = _verb(sub, "sweep", help, seeds=8, noise=0.1, grid=True)
     _arg(sw, "--resume", help="continue an interrupted sweep from its parts", action="store_true")
-    _arg(sw, "--force", help="replace a finished sweep in --out", action="store_true")
     ray = "run the chunks on a Ray cluster (no address: a local one; pip install visjax[ray])"
     _arg(sw, "--ray", None, None, ray, nargs="?", const="local", metavar="ADDRESS")
     me = sub.add_parser("merge", help="the parts of a sweep's shards as one table")
     me.add_argument("paths", nargs="+", metavar="DIR", help="folders holding the parts")
     _arg(me, "--out", None, None, "runs.parquet, runs.csv and summary.json", required=True)
+    _arg(me, "--force", help=_FORCE, action="store_true")
     _arg(me, "--quiet", help="less printing", action="store_true")
     help = "a sweep, then gradient-based tuning from its best point"
     tu = _verb(sub, "tune", help, seeds=4, noise=0.1, grid=True)
@@ -195,6 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     tr = sub.add_parser("track", help="a video to pixel tracks (KLT, forward-backward check)")
     tr.add_argument("video", help="the video (MP4 or anything OpenCV reads, or .npz)")
     _arg(tr, "--out", None, None, "the tracks file: .npz or .csv", required=True)
+    _arg(tr, "--force", help="replace the tracks file if it exists", action="store_true")
     _arg(tr, "--detector", None, "corners", "features to track", choices=("corners", "aruco"))
     _arg(tr, "--max-features", _count, 200, "features alive at once (default 200)")
     _arg(tr, "--fb-threshold", _positive, 0.5, "forward-backward error that drops one, px")
@@ -295,19 +301,71 @@ def main(argv=None) -> int:
         _check(args)
     except argparse.ArgumentTypeError as e:
         parser.error(str(e))
-    try:
-        from .io import staged_output
+    from .io import DataFormatError, staged_output
+    from .io._staging import OutputConflictError
 
-        if args.out is None:
-            _call(args)
-        else:
-            with staged_output(args.out, file=getattr(args, "out_is_file", False)) as staged:
-                args.out = str(staged)
+    try:
+        with _terminated_as_interrupt():
+            if args.out is None:
                 _call(args)
+            else:
+                file = getattr(args, "out_is_file", False)
+                force = bool(getattr(args, "force", False))
+                shard = getattr(args, "shard", None)
+                slot = f"shard-{shard[0]}-of-{shard[1]}" if isinstance(shard, tuple) else None
+                with staged_output(
+                    args.out, file=file, command=args.command, force=force, slot=slot
+                ) as st:
+                    args.out = str(st)
+                    _call(args)
         return 0
-    except (ValueError, RuntimeError) as e:  # a bad data file, a failed run: one line
+    except (DataFormatError, OutputConflictError) as e:  # a bad file, an --out in use: usage
+        sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
+        return 2
+    except (ValueError, RuntimeError) as e:  # a failed run: one line
         sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
         return 1
+    except _Interrupted as e:
+        where = "" if args.out is None else "; nothing was written to --out"
+        sys.stderr.write(f"visjax: interrupted by {e.name}{where}\n")
+        return 128 + e.signum
+
+
+class _Interrupted(BaseException):
+    """SIGINT or SIGTERM, raised where the command was (so that every `finally` runs: the
+    staging folder is removed)."""
+
+    def __init__(self, signum: int):
+        import signal
+
+        super().__init__(signum)
+        self.signum = int(signum)
+        self.name = signal.Signals(signum).name
+
+
+@contextlib.contextmanager
+def _terminated_as_interrupt():
+    """SIGINT and SIGTERM raise `_Interrupted` in the main thread for the block (a command
+    that handles them itself, a sweep, installs its own handlers inside); a
+    `KeyboardInterrupt` (SIGINT under a handler that raised it) becomes one too."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise _Interrupted(signum)
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    except KeyboardInterrupt:
+        raise _Interrupted(signal.SIGINT) from None
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def _one_line(error: Exception) -> str:

@@ -381,9 +381,12 @@ def _parts_folder(folder: Path, job) -> Path:
     """Where a sweep's parts go: beside its other outputs, in the folder the user asked
     for (never the staging one: an interrupted sweep keeps them)."""
     from .io import user_path
+    from .io._staging import written_directly
 
     final = Path(user_path(str(folder)))
-    return final / ("parts" if job is None else f"parts-{job[0]}-of-{job[1]}")
+    parts = final / ("parts" if job is None else f"parts-{job[0]}-of-{job[1]}")
+    written_directly(parts)  # the command's own entry of --out (its manifest)
+    return parts
 
 
 def _refuse_finished(folder: Path, parts: Path, resume: bool, force: bool) -> None:

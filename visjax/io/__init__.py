@@ -6,11 +6,18 @@ staged (atomic) output folders (`staged_output`); and the writing of a command's
 summary (`Outputs`, `write_outputs`, `command_summary`)."""
 
 from ._formats import (
+    MAX_DATA_BYTES as MAX_DATA_BYTES,
+    MAX_DROPPED_FRACTION as MAX_DROPPED_FRACTION,
+    MAX_INTERVAL_S as MAX_INTERVAL_S,
+    MIN_INTERVAL_S as MIN_INTERVAL_S,
+    MIN_OBSERVATIONS as MIN_OBSERVATIONS,
     DataFormatError as DataFormatError,
     MovingPointData as MovingPointData,
     StaticPointsData as StaticPointsData,
     VelocityData as VelocityData,
     load_tracks_csv as load_tracks_csv,
+    max_data_bytes as max_data_bytes,
+    read_npz as read_npz,
     save_tracks_csv as save_tracks_csv,
 )
 from ._outputs import (

@@ -48,17 +48,236 @@ using a moving uncalibrated camera*):
 
 Conventions of eq. (5) of Nath et al.: a world point $w$ is at
 $R_c^T(R_b^T(w - x_b) - x_c)$ in the camera frame.
+
+**What is refused.** A loader reads nothing it has not checked, and every refusal is one
+`DataFormatError` (a `ValueError`) that names the file and the key, which the command line
+prints as one line:
+
+- a file that is not a readable `.npz` archive (empty, truncated or damaged, a single `.npy`
+  array renamed, a text file), and in `load_tracks_csv` an empty, binary or non-UTF-8 file,
+  a row with too few or too many values, or two rows for the same feature and time;
+- an archive whose arrays would take more than `MAX_DATA_BYTES` (2 GiB) uncompressed, judged
+  from the zip's member headers before any array is read; the environment variable
+  `VISJAX_MAX_DATA_BYTES` (read at each load) raises or lowers the limit;
+- a key that is not in the format (with the closest valid key: a misspelt key is never
+  silently ignored), an array of Python objects, a complex array (its imaginary part would
+  be lost), dates or durations (`datetime64`, `timedelta64`) instead of seconds;
+- intrinsics `A` (`A_nominal`) that are not a pinhole camera's: upper-triangular, last row
+  $(0, 0, 1)$ (to 1e-9 relative), positive focal lengths `A[0, 0]`, `A[1, 1]`; the transpose
+  (MATLAB's convention, $K^T$) is named as such;
+- times in other units than seconds: a median sample interval of `t` (or `camera_t`)
+  outside [`MIN_INTERVAL_S`, `MAX_INTERVAL_S`] = [1e-5 s, 10 s], with the likely unit
+  (milliseconds, microseconds, nanoseconds) when it is too long;
+- a feature (a column of `pixels`) seen in fewer than `MIN_OBSERVATIONS` = 2 images (the
+  velocity format counts its reference image): one view shows no motion and no depth.
+
+Frames where pixels are missing are not refused: `coverage` (the fraction of frames with
+every feature seen) and `dropped_fraction()` (the rest) report them, and
+`MAX_DROPPED_FRACTION` is the fraction above which a command should warn that its result
+rests on too few frames.
 """
 
 import csv
+import difflib
+import math
+import os
+import zipfile
+import zlib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
+import numpy.lib.format as npy_format
+
+MAX_DATA_BYTES = 2 * 1024**3
+"""The most bytes a data file's arrays may take once read (the sum of the uncompressed
+sizes of an `.npz` archive's members, a CSV file's size): 2 GiB, far above any realistic
+log, well below what would exhaust a laptop's memory. The environment variable
+`VISJAX_MAX_DATA_BYTES`, read at each load, replaces it."""
+
+MIN_INTERVAL_S = 1e-5
+"""The shortest plausible median interval between samples, s (100 kHz): faster is not a
+camera or a motion log in seconds."""
+
+MAX_INTERVAL_S = 10.0
+"""The longest plausible median interval between samples, s (0.1 Hz): longer is, in
+practice, milliseconds, microseconds or nanoseconds given as seconds."""
+
+MIN_OBSERVATIONS = 2
+"""The fewest images a feature must be seen in, counting the velocity format's reference
+image: one view shows neither motion (the velocity's homography needs the reference and a
+second view) nor depth (the structure of a point needs two views)."""
+
+MAX_DROPPED_FRACTION = 0.5
+"""The largest fraction of frames with a feature missing (`dropped_fraction()`) that a
+command reports as a plain result: above it, most of the estimate rests on held or
+extrapolated frames and the summary should warn."""
+
+_INTRINSICS_TOL = 1e-9  # relative: the last row (0, 0, 1) and the zero below the diagonal
+_NPY_MAGIC = b"\x93NUMPY"
 
 
 class DataFormatError(ValueError):
     """A data file does not follow its documented format (the message says what)."""
+
+
+def max_data_bytes() -> int:
+    """`MAX_DATA_BYTES`, or the environment variable `VISJAX_MAX_DATA_BYTES` when set
+    (read now, not at import); a value that is not a positive number is an error."""
+    text = os.environ.get("VISJAX_MAX_DATA_BYTES", "").strip()
+    if not text:
+        return MAX_DATA_BYTES
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (np.isfinite(value) and value > 0):
+        raise DataFormatError(
+            f"VISJAX_MAX_DATA_BYTES must be a positive number of bytes; got {text!r}."
+        )
+    return int(value)
+
+
+def _size(n: int) -> str:
+    return f"{n / 1024**3:.3g} GiB" if n >= 1024**3 else f"{n / 1024**2:.3g} MiB"
+
+
+def _check_size(path, n: int, what: str) -> None:
+    limit = max_data_bytes()
+    if n > limit:
+        raise DataFormatError(
+            f"{path}: {what} would take {_size(n)} (limit {_size(limit)}; set "
+            "VISJAX_MAX_DATA_BYTES to raise it)."
+        )
+
+
+def _dtype_problem(key: str, dtype: np.dtype) -> str | None:
+    """Why an array of this dtype cannot be a key's value (`None`: it can be)."""
+    if dtype.hasobject:
+        return f"`{key}` holds Python objects (an object array); save numeric arrays."
+    if np.issubdtype(dtype, np.complexfloating):
+        return f"`{key}` is complex: its imaginary part would be lost."
+    if np.issubdtype(dtype, np.timedelta64):
+        return (
+            f"`{key}` holds durations (timedelta64); give seconds as floats, e.g. "
+            f"{key} / np.timedelta64(1, 's')."
+        )
+    if np.issubdtype(dtype, np.datetime64):
+        return (
+            f"`{key}` holds dates (datetime64); give seconds as floats, e.g. "
+            f"({key} - {key}[0]) / np.timedelta64(1, 's')."
+        )
+    if not np.issubdtype(dtype, np.number):
+        return f"`{key}` must be numeric; got {dtype}."
+    return None
+
+
+def _unreadable(path, why: str) -> DataFormatError:
+    return DataFormatError(f"{path}: not a readable .npz file ({why}).")
+
+
+# what reading a damaged archive or member can raise (never numpy's own hints: see `_why`)
+_READ_ERRORS = (
+    zipfile.BadZipFile,
+    zlib.error,
+    EOFError,
+    OSError,
+    ValueError,
+    KeyError,
+    NotImplementedError,  # a compression method zipfile does not know
+    RuntimeError,  # an encrypted member
+)
+
+
+def _why(error: Exception) -> str:
+    text = " ".join(str(error).split()) or type(error).__name__
+    if "pickle" in text:  # numpy's hint to load unsafely: never passed on
+        return "it holds Python objects (pickled data)"
+    return text if len(text) <= 200 else text[:200] + "..."
+
+
+def read_npz(path) -> dict[str, np.ndarray]:
+    """The arrays of an `.npz` file, checked before they are read: an empty, truncated or
+    damaged archive, a single `.npy` array renamed, a text file, a member that is not a
+    `.npy` array, object, complex, date or non-numeric arrays, and an archive whose arrays
+    would take more than `max_data_bytes()` uncompressed all raise `DataFormatError` with a
+    one-line message naming the file (and the key)."""
+    path = Path(path)
+    with _open_npz(path) as zf:
+        return _read_members(path, zf, _npz_keys(path, zf))
+
+
+def _open_npz(path: Path) -> zipfile.ZipFile:
+    if not path.exists():
+        raise DataFormatError(f"{path}: no such file.")
+    if path.is_dir():
+        raise DataFormatError(f"{path}: a folder, not an .npz file.")
+    try:
+        with path.open("rb") as f:
+            head = f.read(8)
+    except OSError as e:
+        raise DataFormatError(f"{path}: cannot be read ({_why(e)}).") from None
+    if not head:
+        raise _unreadable(path, "the file is empty")
+    if head.startswith(_NPY_MAGIC):
+        raise _unreadable(
+            path,
+            "it is a single .npy array, not an archive of named arrays: write it with np.savez",
+        )
+    if path.suffix.lower() == ".csv" or not head.startswith(b"PK"):
+        hint = "; pixel tracks in CSV load with visjax.io.load_tracks_csv" if b"," in head else ""
+        raise _unreadable(path, f"not a zip archive{hint}")
+    try:
+        zf = zipfile.ZipFile(path)
+    except _READ_ERRORS as e:
+        raise _unreadable(path, f"a truncated or damaged zip archive: {_why(e)}") from None
+    try:
+        # before any array is read: the sizes the members' headers declare (a member is
+        # never inflated past its declared size, so the sum bounds what loading takes)
+        _check_size(path, sum(info.file_size for info in zf.infolist()), "its arrays")
+    except BaseException:
+        zf.close()
+        raise
+    return zf
+
+
+def _npz_keys(path: Path, zf: zipfile.ZipFile) -> dict[str, zipfile.ZipInfo]:
+    keys = {}
+    for info in zf.infolist():
+        if info.is_dir():
+            continue
+        if not info.filename.endswith(".npy"):
+            raise _unreadable(path, f"its member `{info.filename}` is not a .npy array")
+        keys[info.filename[: -len(".npy")]] = info
+    return keys
+
+
+def _read_members(path: Path, zf: zipfile.ZipFile, keys: dict) -> dict[str, np.ndarray]:
+    arrays = {}
+    for key, info in keys.items():
+        try:
+            with zf.open(info) as f:
+                version = npy_format.read_magic(f)
+                if version == (1, 0):
+                    shape, fortran, dtype = npy_format.read_array_header_1_0(f)
+                elif version == (2, 0):
+                    shape, fortran, dtype = npy_format.read_array_header_2_0(f)
+                else:  # (3, 0): utf-8 field names, which no visjax key has
+                    raise ValueError(f"unsupported .npy format version {version}")
+                problem = _dtype_problem(key, dtype)
+                if problem is not None:
+                    raise DataFormatError(f"{path}: {problem}")
+                claimed = math.prod(shape) * dtype.itemsize
+            if claimed > info.file_size:
+                raise ValueError(f"it declares {claimed} bytes but holds {info.file_size}")
+            with zf.open(info) as f:
+                array = npy_format.read_array(f, allow_pickle=False)
+        except DataFormatError:
+            raise
+        except _READ_ERRORS as e:
+            raise _unreadable(path, f"`{key}`: {_why(e)}") from None
+        arrays[key] = np.asarray(array)
+    return arrays
 
 
 def _rotation_ok(R) -> bool:
@@ -71,6 +290,82 @@ def _rotation_ok(R) -> bool:
     )
 
 
+def _check_intrinsics(A, key: str) -> None:
+    """A pinhole camera's intrinsics: upper-triangular, last row (0, 0, 1) to
+    `_INTRINSICS_TOL` relative, positive focal lengths; its transpose is named."""
+    A = np.asarray(A, float)
+    tol = _INTRINSICS_TOL * max(1.0, float(np.max(np.abs(A))))
+    last = ", ".join(f"{x:g}" for x in A[2])
+    row_ok = abs(A[2, 0]) <= tol and abs(A[2, 1]) <= tol and abs(A[2, 2] - 1) <= _INTRINSICS_TOL
+    if not row_ok:
+        if abs(A[0, 2]) <= tol and abs(A[1, 2]) <= tol and abs(A[2, 2] - 1) <= _INTRINSICS_TOL:
+            raise DataFormatError(
+                f"`{key}` looks transposed (MATLAB's convention: K'): its last row must be "
+                f"(0, 0, 1) and its last column the principal point (cx, cy, 1); got the last "
+                f"row ({last}): give {key}.T."
+            )
+        raise DataFormatError(
+            f"`{key}` must be a pinhole camera's intrinsics, its last row (0, 0, 1); got ({last})."
+        )
+    if abs(A[1, 0]) > tol:
+        raise DataFormatError(
+            f"`{key}` must be upper-triangular (a pinhole camera's intrinsics); "
+            f"got {key}[1, 0] = {A[1, 0]:g}."
+        )
+    if not (A[0, 0] > 0 and A[1, 1] > 0):
+        raise DataFormatError(
+            f"`{key}`'s focal lengths {key}[0, 0] and {key}[1, 1] must be positive (pixels); "
+            f"got {A[0, 0]:g} and {A[1, 1]:g}."
+        )
+
+
+def _check_time_units(t, key: str) -> None:
+    """The median sample interval within [`MIN_INTERVAL_S`, `MAX_INTERVAL_S`]: seconds."""
+    t = np.asarray(t, float)
+    if t.shape[0] < 2:
+        return
+    interval = float(np.median(np.diff(t)))
+    if interval > MAX_INTERVAL_S:
+        # 10 ms to 10 s per frame in the guessed unit
+        unit = (
+            "milliseconds"
+            if interval < 1e4
+            else "microseconds"
+            if interval < 1e7
+            else ("nanoseconds")
+        )
+        raise DataFormatError(
+            f"`{key}` looks like {unit} (median interval {interval:g}): give seconds "
+            f"(a plausible interval is {MIN_INTERVAL_S:g} to {MAX_INTERVAL_S:g} s)."
+        )
+    if interval < MIN_INTERVAL_S:
+        raise DataFormatError(
+            f"`{key}`'s median interval is {interval:g} s, faster than {1 / MIN_INTERVAL_S:g} "
+            "Hz: likely not seconds; give seconds."
+        )
+
+
+def _check_observations(seen, extra: int = 0, what: str = "feature") -> None:
+    """Every column of `seen` (N, n) true in at least `MIN_OBSERVATIONS - extra` rows."""
+    counts = np.sum(seen, axis=0) + extra
+    bad = np.flatnonzero(counts < MIN_OBSERVATIONS)
+    if bad.size == 0:
+        return
+    i, c = int(bad[0]), int(counts[bad[0]])
+    more = f" (and {bad.size - 1} more)" if bad.size > 1 else ""
+    name = f"{what} {i} (column {i} of `pixels`, 0-based)" if seen.shape[1] > 1 else what
+    counted = ", counting the reference image" if extra else ""
+    if c == 0:
+        raise DataFormatError(
+            f"{name} is never seen (NaN in every frame){more}: drop it from `pixels`."
+        )
+    raise DataFormatError(
+        f"{name} is seen in {c} image(s){counted}{more}; each needs at least "
+        f"MIN_OBSERVATIONS = {MIN_OBSERVATIONS} (one view shows no motion): drop it from "
+        "`pixels` or track it longer."
+    )
+
+
 class _Format:
     """Shared load/save/validate for a dataclass of NumPy arrays."""
 
@@ -79,25 +374,38 @@ class _Format:
 
     @classmethod
     def load(cls, path):
-        """Read and validate a `.npz` file; a missing required key, a wrong shape or a bad
-        value raises `DataFormatError` naming the key."""
+        """Read and validate a `.npz` file (`read_npz`'s checks, then the format's): an
+        unknown or missing key, a wrong shape or a bad value raises `DataFormatError`
+        naming the file and the key."""
         path = Path(path)
-        if not path.exists():
-            raise DataFormatError(f"{path}: no such file.")
+        known = [f.name for f in fields(cls)]
+        with _open_npz(path) as zf:
+            keys = _npz_keys(path, zf)
+            unknown = [k for k in keys if k not in known]
+            if unknown:
+                named = ", ".join(
+                    f"`{k}`"
+                    + "".join(
+                        f" (did you mean `{m}`?)" for m in difflib.get_close_matches(k, known, n=1)
+                    )
+                    for k in unknown
+                )
+                raise DataFormatError(
+                    f"{path}: unknown key{'s' if len(unknown) > 1 else ''} {named}; the "
+                    f"{cls.NAME} format's keys are {', '.join(known)}."
+                )
+            missing = [k for k in cls.REQUIRED if k not in keys]
+            if missing:
+                raise DataFormatError(
+                    f"{path}: the {cls.NAME} format needs the keys {list(cls.REQUIRED)}; "
+                    f"missing {missing}."
+                )
+            arrays = _read_members(path, zf, keys)
+        data = cls(**arrays)
         try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: np.asarray(z[k]) for k in z.files}
-        except (OSError, ValueError) as e:
-            raise DataFormatError(f"{path}: not a readable .npz file ({e}).") from None
-        missing = [k for k in cls.REQUIRED if k not in arrays]
-        if missing:
-            raise DataFormatError(
-                f"{path}: the {cls.NAME} format needs the keys {list(cls.REQUIRED)}; "
-                f"missing {missing}."
-            )
-        known = {f.name for f in fields(cls)}
-        data = cls(**{k: v for k, v in arrays.items() if k in known})
-        data.validate()
+            data.validate()
+        except DataFormatError as e:
+            raise DataFormatError(f"{path}: {e}") from None
         return data
 
     def save(self, path) -> Path:
@@ -108,17 +416,35 @@ class _Format:
         np.savez(path, **{k: np.asarray(v) for k, v in arrays.items() if v is not None})
         return path
 
+    def _seen(self) -> np.ndarray:
+        """(N, n) booleans: feature i seen (both pixel coordinates finite) in frame k."""
+        p = np.asarray(self.pixels, float)
+        seen = np.all(np.isfinite(p), axis=-1)
+        return seen[:, None] if seen.ndim == 1 else seen
+
+    def dropped_fraction(self) -> float:
+        """The fraction of frames in which a feature is missing (a NaN pixel): any of the
+        n features (velocity, euclidean), the point (structure). Compare it with
+        `MAX_DROPPED_FRACTION`."""
+        return float(np.mean(~np.all(self._seen(), axis=1)))
+
+    @property
+    def coverage(self) -> float:
+        """The fraction of frames in which every feature is seen: `1 - dropped_fraction()`."""
+        return 1.0 - self.dropped_fraction()
+
     def _shape(self, key, shape):
         v = getattr(self, key)
         if v is None:
             return
         v = np.asarray(v)
+        problem = _dtype_problem(key, v.dtype)
+        if problem is not None:
+            raise DataFormatError(problem)
         ok = v.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, v.shape))
         if not ok:
             want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
             raise DataFormatError(f"`{key}` must have shape {want}; got {v.shape}.")
-        if not np.issubdtype(v.dtype, np.number):
-            raise DataFormatError(f"`{key}` must be numeric; got {v.dtype}.")
 
     def _finite(self, *keys):
         for key in keys:
@@ -130,6 +456,7 @@ class _Format:
         t = np.asarray(getattr(self, key))
         if t.shape[0] < 2 or not np.all(np.diff(t) > 0):
             raise DataFormatError(f"`{key}` must hold at least 2 strictly increasing times.")
+        _check_time_units(t, key)
 
 
 @dataclass
@@ -170,6 +497,7 @@ class VelocityData(_Format):
             self._shape(key, shape)
         self._times()
         self._finite("t", "A", "R_star", "s1", "known_length", "velocity", "K", "rho")
+        _check_intrinsics(self.A, "A")
         if not _rotation_ok(self.R_star):
             raise DataFormatError("`R_star` must be a rotation matrix.")
         i, j, length = np.asarray(self.known_length, float)
@@ -189,6 +517,7 @@ class VelocityData(_Format):
             v = getattr(self, key)
             if v is not None and not np.all(np.asarray(v) > 0):
                 raise DataFormatError(f"`{key}` must be positive.")
+        _check_observations(self._seen(), extra=int(self.reference_pixels is not None))
 
     @property
     def length(self) -> tuple[int, int, float]:
@@ -225,6 +554,7 @@ class MovingPointData(_Format):
         self._times()
         self._times("camera_t")
         self._finite("t", "A", "camera_t", "camera_velocity", "D", "position", "depth_guess")
+        _check_intrinsics(self.A, "A")
         if self.depth_guess is not None and not float(self.depth_guess) > 0:
             raise DataFormatError(f"`depth_guess` must be positive; got {self.depth_guess}.")
         if not np.linalg.norm(self.D) > 0:
@@ -235,6 +565,7 @@ class MovingPointData(_Format):
             raise DataFormatError(
                 "the camera velocity must be known from the first frame on: `camera_t[0]` > `t[0]`."
             )
+        _check_observations(self._seen(), what="the point")
 
 
 @dataclass
@@ -297,6 +628,8 @@ class StaticPointsData(_Format):
         for key in ("platform_R", "R_c_nominal"):
             if not _rotation_ok(getattr(self, key)):
                 raise DataFormatError(f"`{key}` must hold rotation matrices.")
+        _check_intrinsics(self.A_nominal, "A_nominal")
+        _check_observations(self._seen())
 
     @property
     def n_known(self) -> int:
@@ -327,27 +660,60 @@ def save_tracks_csv(path, t, pixels) -> Path:
 
 def load_tracks_csv(path, n_features: int | None = None):
     """The inverse of `save_tracks_csv`: `(t (N,), pixels (N, n, 2))`, NaN where a feature
-    has no row at a time. `n_features` fixes n (default: the largest index + 1)."""
+    has no row at a time. `n_features` fixes n (default: the largest index + 1). An empty,
+    binary or non-UTF-8 file, a row without four values, a value that is not a number, a
+    time that is not finite or not in seconds, and two rows for one feature at one time
+    raise `DataFormatError` naming the file (and the line)."""
     path = Path(path)
+    if not path.exists():
+        raise DataFormatError(f"{path}: no such file.")
     try:
-        with path.open(newline="") as f:
-            rows = list(csv.DictReader(f))
+        _check_size(path, path.stat().st_size, "its rows")
+        with path.open(newline="", encoding="utf-8-sig") as f:
+            lines = [(k, row) for k, row in enumerate(csv.reader(f), start=1) if row]
+    except UnicodeDecodeError:
+        raise DataFormatError(f"{path}: not a readable CSV file (not UTF-8 text).") from None
+    except csv.Error as e:
+        raise DataFormatError(f"{path}: not a readable CSV file ({_why(e)}).") from None
     except OSError as e:
-        raise DataFormatError(f"{path}: {e}") from None
-    if not rows or set(rows[0]) != {"t", "feature", "u", "v"}:
+        raise DataFormatError(f"{path}: cannot be read ({_why(e)}).") from None
+    if not lines:
+        raise DataFormatError(f"{path}: the file is empty; expected the columns t, feature, u, v.")
+    header = [c.strip() for c in lines[0][1]]
+    if sorted(header) != ["feature", "t", "u", "v"]:
         raise DataFormatError(f"{path}: expected the columns t, feature, u, v.")
-    try:
-        t_all = np.array([float(r["t"]) for r in rows])
-        idx = np.array([int(r["feature"]) for r in rows])
-        uv = np.array([[float(r["u"]), float(r["v"])] for r in rows])
-    except ValueError as e:
-        raise DataFormatError(f"{path}: a value is not a number ({e}).") from None
+    col = {name: header.index(name) for name in header}
+    rows = lines[1:]
+    if not rows:
+        raise DataFormatError(f"{path}: no observation after the header.")
+    t_all, idx, uv = np.empty(len(rows)), np.empty(len(rows), int), np.empty((len(rows), 2))
+    for r, (line, row) in enumerate(rows):
+        if len(row) != 4:
+            raise DataFormatError(f"{path}: line {line} has {len(row)} values; expected 4.")
+        try:
+            t_all[r] = float(row[col["t"]])
+            idx[r] = int(row[col["feature"]])
+            uv[r] = float(row[col["u"]]), float(row[col["v"]])
+        except ValueError as e:
+            raise DataFormatError(f"{path}: line {line}: a value is not a number ({e}).") from None
+    if not np.all(np.isfinite(t_all)):
+        raise DataFormatError(f"{path}: every time `t` must be finite.")
     if np.any(idx < 0):
         raise DataFormatError(f"{path}: feature indices must be non-negative.")
     t, k = np.unique(t_all, return_inverse=True)
     n = int(idx.max()) + 1 if n_features is None else n_features
     if np.any(idx >= n):
         raise DataFormatError(f"{path}: a feature index is >= n_features = {n}.")
+    pairs, first = np.unique(k * n + idx, return_index=True)
+    if pairs.shape[0] < idx.shape[0]:
+        dup = np.setdiff1d(np.arange(idx.shape[0]), first)[0]
+        raise DataFormatError(
+            f"{path}: line {rows[dup][0]} repeats feature {idx[dup]} at t = {t_all[dup]!r}."
+        )
+    try:
+        _check_time_units(t, "t")
+    except DataFormatError as e:
+        raise DataFormatError(f"{path}: {e}") from None
     pixels = np.full((t.shape[0], n, 2), np.nan)
     pixels[k, idx] = uv
     return t, pixels

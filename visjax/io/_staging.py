@@ -5,10 +5,12 @@ record name the final folder, never the staging one."""
 
 import contextlib
 import contextvars
+import json
 import os
 import shutil
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 _STAGED: contextvars.ContextVar[tuple[str, str] | None] = contextvars.ContextVar(
@@ -68,44 +70,240 @@ def check_output_path(out, *, file: bool = False) -> None:
         raise ValueError(f"--out {out!r}: {str(parent)!r} is not writable")
 
 
+_DIRECT: contextvars.ContextVar[tuple[Path, set] | None] = contextvars.ContextVar(
+    "visjax_direct_outputs", default=None
+)
+MANIFEST = ".visjax-outputs.json"  # in an output folder: the entries a command wrote there
+_LOCK = ".visjax.lock"
+_STAGE_PREFIX = ".visjax-stage-"
+
+
+class OutputConflictError(ValueError):
+    """An output folder or file that a command may not write (a clear message says why)."""
+
+
+def _read_manifest(path: Path) -> dict | None:
+    try:
+        m = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if not (isinstance(m, dict) and isinstance(m.get("entries"), list)):
+        return None
+    return m
+
+
 @contextlib.contextmanager
-def staged_output(final, *, file: bool = False):
+def _locked(lock: Path, what: str):
+    """An exclusive lock on `lock` (a file, created; removed on exit) for the block;
+    `OutputConflictError` if another process holds it. The lock is the kernel's (`flock`):
+    a process that dies, even by SIGKILL, releases it."""
+    import fcntl
+
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            raise OutputConflictError(
+                f"{what} is being written by another visjax run; wait for it to end, or "
+                "choose another --out"
+            ) from None
+        try:  # the file we locked is still the one at the path (not one just removed)
+            same = os.stat(lock).st_ino == os.fstat(fd).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lock)
+        os.close(fd)
+
+
+def _move(source: Path, destination: Path) -> None:
+    """`source` to `destination`; a folder into an existing folder (one the command wrote
+    straight into the final folder, `written_directly`) entry by entry."""
+    if source.is_dir() and destination.is_dir() and not destination.is_symlink():
+        for item in source.iterdir():
+            _move(item, destination / item.name)
+        return
+    if destination.is_dir() and not destination.is_symlink():
+        shutil.rmtree(destination)
+    os.replace(source, destination)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+@contextlib.contextmanager
+def staged_output(
+    final,
+    *,
+    file: bool = False,
+    command: str | None = None,
+    force: bool = False,
+    slot: str | None = None,
+):
     """Stage an output folder (or, with `file=True`, one output file) and move it into place
-    when the block exits without an exception; on an exception nothing is moved and the
-    staging folder is removed.
+    when the block exits without an exception; on an exception (a failure, SIGINT, SIGTERM
+    turned into one) nothing is moved and the staging folder is removed.
+
+    The folder is the command's, shared with the user's own files: the command writes only
+    its own entries into it and records them in `.visjax-outputs.json`; it never deletes
+    or replaces an entry it did not write. The same command run again replaces its earlier
+    entries whole (an entry of the earlier run that this one does not write is removed);
+    another command's results are refused unless `force`, which replaces them whole. A
+    lock (`.visjax.lock`, the kernel's `flock`) refuses a second run into the same folder
+    while one is writing. An output file that exists is replaced only with `force`.
 
     **Arguments:**
 
-    - `final`: the folder (or file) the user asked for; made if missing. An existing
-        folder keeps its other contents; an entry of the same name is replaced whole.
+    - `final`: the folder (or file) the user asked for; made if missing (and removed again
+        if the command fails and it is still empty).
     - `file`: stage one file instead of a folder.
+    - `command`: the name recorded in the folder's manifest (e.g. `"compare"`).
+    - `force`: replace another command's results (or an existing output file).
+    - `slot`: one of several runs that write into the same folder at once by design (a
+        sweep's `--shard i/N` slices of a job array): its own lock and its own manifest
+        (`.visjax-outputs-SLOT.json`), and no earlier entry is removed (the other slices'
+        parts stay; `visjax merge` assembles them).
 
-    **Yields:** the path to write to (a hidden `.visjax-*` folder beside `final`, or a file
-    inside it). Inside the block, `sys.stdout` names `final` where the staging path is
-    printed, and `visjax.io.write_summary` records `final` in place of the staging path.
+    **Raises:** `OutputConflictError` (a `ValueError`) before any work for another
+    command's results without `force`, an existing file without `force`, or a folder that
+    another run holds; and at the end, before anything is moved, when an entry the command
+    wrote has the name of one it did not write there (the results are then kept in a
+    visible `visjax-results-*` folder inside `final`, and the error says where).
+
+    **Yields:** the path to write to (a hidden `.visjax-stage-*` folder inside `final`, or
+    beside the file). Inside the block, `sys.stdout` names `final` where the staging path
+    is printed, and `visjax.io.write_summary` records `final` in place of the staging path.
     """
     final = Path(final)
-    anchor = final if final.exists() else final.parent
-    while not anchor.exists():
-        anchor = anchor.parent
-    staging = Path(tempfile.mkdtemp(prefix=".visjax-", dir=anchor))
-    target = staging / final.name if file else staging
+    folder = final.parent if file else final
+    made = []
+    probe = folder
+    while not probe.exists():
+        made.append(probe)
+        probe = probe.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    lock = folder / (f".{final.name}{_LOCK}" if file else f".visjax-{slot}.lock" if slot else _LOCK)
+    try:
+        with _locked(lock, f"--out {final}"):
+            # staging folders of a run killed by SIGKILL (the lock says none is running)
+            pattern = f"{_STAGE_PREFIX}{final.name}-*" if file else f"{_STAGE_PREFIX}*"
+            for stale in [] if slot else folder.glob(pattern):
+                if stale.is_dir():
+                    shutil.rmtree(stale, ignore_errors=True)
+            if file:
+                if final.exists() and not force:
+                    raise OutputConflictError(
+                        f"--out {final} exists: --force to replace it, or choose another file"
+                    )
+                with _staging(folder, f"{final.name}-") as staging:
+                    target = staging / final.name
+                    with _renaming(target, final):
+                        yield target
+                    os.replace(target, final)
+                return
+            earlier = []
+            names = [MANIFEST] + sorted(p.name for p in final.glob(".visjax-outputs-*.json"))
+            for name in names:  # the folder's manifest, and those of a job's slices
+                manifest = _read_manifest(final / name)
+                if manifest is None:
+                    continue
+                if manifest.get("command") != command and not force:
+                    raise OutputConflictError(
+                        f"--out {final} holds the results of `visjax {manifest.get('command')}`"
+                        f" (its {name}): --force to replace them, or choose another folder"
+                    )
+                earlier += [e for e in manifest["entries"] if isinstance(e, str) and "/" not in e]
+                if slot is None:
+                    earlier.append(name)  # replaced whole: the manifest goes too
+            record_at = MANIFEST if slot is None else f".visjax-outputs-{slot}.json"
+            special = {record_at, _LOCK}
+            direct: set[str] = set()
+            with _staging(final, "") as staging:
+                token = _DIRECT.set((final, direct))
+                try:
+                    with _renaming(staging, final):
+                        yield staging
+                finally:
+                    _DIRECT.reset(token)
+                produced = sorted(p.name for p in staging.iterdir())
+                owned = set(earlier) | direct
+                clash = [n for n in produced if (final / n).exists() and n not in owned]
+                if clash:
+                    keep = final / f"visjax-results-{time.strftime('%Y%m%d-%H%M%S')}"
+                    os.replace(staging, keep)
+                    raise OutputConflictError(
+                        f"--out {final}: {clash[0]!r} is not from this command's earlier run "
+                        f"(not in {MANIFEST}); nothing there was replaced, the results are "
+                        f"in {keep}"
+                    )
+                for name in [] if slot else earlier:  # the earlier run's: replaced whole
+                    if name not in special and name not in direct:
+                        _remove(final / name)
+                for name in produced:
+                    _move(staging / name, final / name)
+            entries = sorted(direct | set(produced))
+            record = {"command": command, "entries": entries, "written_utc": _now()}
+            (final / record_at).write_text(json.dumps(record, indent=1) + "\n")
+    except BaseException:
+        for path in made:  # folders this call made, still empty: removed again
+            with contextlib.suppress(OSError):
+                path.rmdir()
+        raise
+
+
+def written_directly(path) -> None:
+    """Record that the command writes `path` (an entry of its final output folder, e.g. a
+    sweep's parts, written as they finish) straight into the final folder, not into the
+    staging one: it is then the command's own in the folder's manifest, and not removed
+    as an earlier run's entry. Outside `staged_output`, or for a path elsewhere, nothing."""
+    state = _DIRECT.get()
+    if state is None:
+        return
+    final, direct = state
+    try:
+        relative = Path(path).relative_to(final)
+    except ValueError:
+        return
+    if relative.parts:
+        direct.add(relative.parts[0])
+
+
+def _now() -> str:
+    import datetime
+
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+@contextlib.contextmanager
+def _staging(parent: Path, tag: str):
+    staging = Path(tempfile.mkdtemp(prefix=f"{_STAGE_PREFIX}{tag}", dir=parent))
+    try:
+        yield staging
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _renaming(target: Path, final: Path):
     token = _STAGED.set((str(target), str(final)))
     stdout = sys.stdout
     sys.stdout = _Renaming(stdout)
     try:
-        yield target
-        if file:
-            final.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(target, final)
-        else:
-            final.mkdir(parents=True, exist_ok=True)
-            for item in staging.iterdir():
-                destination = final / item.name
-                if destination.is_dir():
-                    shutil.rmtree(destination)
-                os.replace(item, destination)
+        yield
     finally:
         sys.stdout = stdout
         _STAGED.reset(token)
-        shutil.rmtree(staging, ignore_errors=True)
