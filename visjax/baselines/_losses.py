@@ -68,6 +68,21 @@ class Loss(eqx.Module):
             w = k * jnp.sqrt(jnp.log1p((t / k) ** 2)) / t
         return jnp.where(small, 1.0, w)
 
+    def irls_weight(self, s):
+        """The M-estimator's weight $\\psi(s)/s = \\rho'(s)/s$ at block norms `s` (Huber,
+        *Robust Statistics*; Hartley and Zisserman app. A6.8): iteratively reweighted least
+        squares minimises $\\sum_i \\rho(\\|r_i\\|)$ by weighting each block's squared
+        norm with it at the current residuals (a fixed point of the reweighting is a
+        stationary point of the loss). Squared: 1; Huber: 1 for $s \\le k$, $k/s$ beyond;
+        Cauchy: $1/(1 + s^2/k^2)$. In $(0, 1]$, 1 at $s = 0$; continuous, and differentiable
+        but at Huber's threshold."""
+        if self.kind == "squared":
+            return jnp.ones_like(s)
+        k = self.scale.astype(jnp.result_type(s))
+        if self.kind == "huber":
+            return jnp.where(s <= k, 1.0, k / jnp.maximum(s, k))
+        return 1.0 / (1.0 + (s / k) ** 2)
+
     def __call__(self, r: Float[Array, "... d"]) -> Float[Array, "... d"]:
         """The rescaled residual blocks $\\tilde r_i = w(\\|r_i\\|) r_i$ (the last axis is a
         block), whose half squared norm is $\\rho(\\|r_i\\|)$."""

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS
-from ..baselines import AbstractEKFModel, extended_kalman_filter, triangulate_point
+from ..baselines import AbstractEKFModel, cauchy, extended_kalman_filter, triangulate_point
 from ..estimators import (
     AbstractEstimator,
     AbstractJumpEstimator,
@@ -279,6 +279,12 @@ TWIST = (
 )  # constant (world frame): sideways and forwards, turning
 CAMERA = ((600.0, 0.0, 320.0), (0.0, 600.0, 240.0), (0.0, 0.0, 1.0))  # intrinsics, pixels
 
+# the robust baselines' settings (`robust=True`; a stated choice, not tuned to any result, as
+# the static-points problem's): the Cauchy loss at 1 px for the least-squares triangulation
+# (its influence vanishes for large residuals), the 0.9999 gate for the EKF
+ROBUST_SCALE_PX = 1.0  # the Cauchy loss' scale of the robust triangulation, px
+ROBUST_GATE = 0.9999  # the robust EKF's gate on each point's measured pair
+
 
 class PointDepthScene(eqx.Module):
     """The scene of `point_depth_scene`: `ts` (N,), `points` (N, n, 3) in the camera frame
@@ -321,11 +327,15 @@ def _first_failure(results, n):
 
 class LeastSquaresDepth(eqx.Module):
     """A baseline's solution: `ts`, `depth` (N, n) (NaN before a least-squares window
-    determines a point), `result` (the first failure over the points)."""
+    determines a point), `result` (the first failure over the points), `depth_std` (N, n)
+    the standard deviation of each depth as the method predicts it (the least-squares
+    triangulation: from its covariance; the EKF: from its inverse depth's variance; NaN
+    where the depth is)."""
 
     ts: Float[Array, " N"]
     depth: Float[Array, "N n"]
     result: Any
+    depth_std: Float[Array, "N n"]
 
 
 class PointDepthProblem(AbstractProblem):
@@ -339,19 +349,35 @@ class PointDepthProblem(AbstractProblem):
 
     Metrics: `depth_error` the worst relative depth error over the points at the last
     sample; `time_to_5pct` the first time from which every point's relative error stays
-    below 5% (the run's length if never)."""
+    below 5% (the run's length if never). Uncertainty (`uncertainty`): `depth_error_std`,
+    the largest over the points of the predicted standard deviation of the depth over the
+    true depth at the last sample (the baselines' own: the triangulation's covariance,
+    the EKF's variance; NaN for the observer, which predicts none).
+
+    `robust` (the command line's `--robust`): the baselines' robust settings for pixel
+    tracks with outliers: the triangulation minimises the Cauchy loss of each frame's
+    reprojection residual with the scale `ROBUST_SCALE_PX` (iteratively reweighted least
+    squares, `triangulate_point(..., loss=...)`), and the EKF gates each point's measured
+    pair at the `ROBUST_GATE` quantile (`ExtendedKalmanFilter`). The observer has no
+    robust setting: it takes every sample it is given."""
 
     methods: ClassVar[tuple] = ("estimator", "least_squares", "ekf")
     metric: ClassVar[str] = "depth_error"
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
-    title: ClassVar[str] = "depth of static points, moving camera (Spica et al.)"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 
     scene: PointDepthScene
     noise_px: float = eqx.field(static=True, default=0.0)
     projection: str = eqx.field(static=True, default="planar")
     window: int = eqx.field(static=True, default=250)
+    robust: bool = eqx.field(static=True, default=False)
+
+    @property
+    def title(self) -> str:
+        return "depth of static points, moving camera (Spica et al.)" + (
+            ", robust baselines" if self.robust else ""
+        )
 
     def parameters(self):
         return {
@@ -366,6 +392,12 @@ class PointDepthProblem(AbstractProblem):
             "projection": self.projection,
             "window_samples": self.window,
             "samples": int(self.scene.ts.shape[0]),
+            "robust": (
+                f"least squares: Cauchy loss, scale {ROBUST_SCALE_PX:g} px (iteratively "
+                f"reweighted); EKF: gate {ROBUST_GATE:g} on each measured pair"
+                if self.robust
+                else "none (least squares, no gate)"
+            ),
         }
 
     def inputs(self, key):
@@ -389,17 +421,29 @@ class PointDepthProblem(AbstractProblem):
         if method == "ekf":
             return self._ekf(params, inputs)
 
+        # the robust loss in normalised coordinates: its pixel scale over the focal length
+        loss = cauchy(ROBUST_SCALE_PX / sc.K[0, 0]) if self.robust else None
+
         def one(pixels):
             stream = moving_point_stream(sc.ts, pixels, sc.twists, sc.K, throw=False)
-            sol = triangulate_point(stream, window=self.window, throw=False)
-            depth = sol.outputs.position[:, 2]
+            sol = triangulate_point(stream, window=self.window, loss=loss, throw=False)
+            m, cov = sol.outputs.position, sol.diagnostics.cov
             if self.projection == "spherical":
-                depth = jnp.linalg.norm(sol.outputs.position, axis=-1)
-            return depth, sol.result
+                # the distance |m|, to first order: var = u^T C u, u = m / |m|
+                depth = jnp.linalg.norm(m, axis=-1)
+                u = m / depth[:, None]
+                var = jnp.einsum("ni,nij,nj->n", u, cov, u)
+            else:
+                depth, var = m[:, 2], cov[:, 2, 2]
+            std = jnp.where(jnp.isfinite(depth), jnp.sqrt(jnp.maximum(var, 0.0)), jnp.nan)
+            return depth, sol.result, std
 
-        depth, results = jax.vmap(one, in_axes=1, out_axes=(1, 0))(inputs)
+        depth, results, std = jax.vmap(one, in_axes=1, out_axes=(1, 0, 1))(inputs)
         return LeastSquaresDepth(
-            ts=sc.ts, depth=depth, result=_first_failure(results, depth.shape[1])
+            ts=sc.ts,
+            depth=depth,
+            result=_first_failure(results, depth.shape[1]),
+            depth_std=std,
         )
 
     def _ekf(self, params, inputs):
@@ -413,17 +457,26 @@ class PointDepthProblem(AbstractProblem):
             m = pixel_to_normalized(pixels, sc.K)
             x0 = jnp.stack([m[0, 0], m[0, 1], chi0])
             P0 = jnp.diag(jnp.stack([model.r, model.r, chi0**2]))
-            sol = extended_kalman_filter(model, sc.ts, m, sc.twists, x0, P0, throw=False)
+            sol = extended_kalman_filter(model, sc.ts, m, sc.twists, x0, P0, gate=gate, throw=False)
             chi = sol.outputs.x[:, 2]
+            # the depth's standard deviation from the inverse depth's, to first order:
+            # d(1/chi) = -d(chi)/chi^2
+            std = jnp.sqrt(jnp.maximum(sol.outputs.P[:, 2, 2], 0.0)) / chi**2
             if self.projection == "spherical":  # the distance along the measured bearing
-                depth = jnp.sqrt(1.0 + jnp.sum(m**2, axis=-1)) / chi
+                scale = jnp.sqrt(1.0 + jnp.sum(m**2, axis=-1))
+                depth, std = scale / chi, scale * std
             else:
                 depth = 1.0 / chi
-            return depth, sol.result
+            std = jnp.where(jnp.isfinite(depth), std, jnp.nan)
+            return depth, sol.result, std
 
-        depth, results = jax.vmap(one, in_axes=1, out_axes=(1, 0))(inputs)
+        gate = ROBUST_GATE if self.robust else None
+        depth, results, std = jax.vmap(one, in_axes=1, out_axes=(1, 0, 1))(inputs)
         return LeastSquaresDepth(
-            ts=sc.ts, depth=depth, result=_first_failure(results, depth.shape[1])
+            ts=sc.ts,
+            depth=depth,
+            result=_first_failure(results, depth.shape[1]),
+            depth_std=std,
         )
 
     def _truth(self):
@@ -439,6 +492,16 @@ class PointDepthProblem(AbstractProblem):
         first = jnp.argmax(settled)
         time = jnp.where(jnp.any(settled), ts[first] - ts[0], ts[-1] - ts[0])
         return {"depth_error": jnp.max(err[-1]), "time_to_5pct": time}
+
+    def uncertainty(self, method, solution):
+        """`depth_error_std`: the largest over the points of the predicted standard
+        deviation of the depth over the true depth at the last sample (the predicted spread
+        of each point's relative depth error, which `depth_error` takes the largest of);
+        NaN for the observer."""
+        truth = self._truth()[-1]
+        if method == "estimator":
+            return {"depth_error_std": jnp.full((), jnp.nan, truth.dtype)}
+        return {"depth_error_std": jnp.max(solution.depth_std[-1] / truth)}
 
     def figure(self, method, solution):
         """The relative depth error of every point over time (log scale), the 5% line."""
@@ -468,10 +531,12 @@ def point_depth_problem(
     rate_hz: float = 1000.0,
     variant: str | None = None,
     window_s: float = 0.25,
+    robust: bool = False,
 ) -> PointDepthProblem:
     """The `point-depth` problem on `point_depth_scene(duration, rate_hz)` with Gaussian
     pixel noise `noise_px`; `variant` (`--set`) the projection, `"planar"` (default) or
-    `"spherical"`; `window_s` the least-squares baseline's window (s)."""
+    `"spherical"`; `window_s` the least-squares baseline's window (s); `robust`: the
+    baselines' robust settings (`PointDepthProblem`)."""
     projection = variant or "planar"
     if projection not in PointDepthObserver.dims:
         raise ValueError(f'the variant must be "planar" or "spherical"; got {variant!r}.')
@@ -483,6 +548,7 @@ def point_depth_problem(
         noise_px=float(noise_px),
         projection=projection,
         window=window,
+        robust=bool(robust),
     )
 
 
