@@ -105,7 +105,7 @@ BAD_OPTIONS = [
     ["sweep", "structure", "--set", "III.9"],
     ["tune", "structure", "--rate", "30"],
     ["tune", "velocity", "--steps", "0"],
-    ["compare", "velocity", "--robust"],
+    ["compare", "moving_point", "--robust"],
     ["structure", "--set", "III.9"],
     ["structure", "--duration", "0"],
     ["structure", "--noise", "-0.1"],

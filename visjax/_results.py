@@ -84,6 +84,12 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "threshold (RANSAC found no consensus, or the threshold is not positive): no "
         "homography is determined."
     )
+    chattering_step = (
+        "The integration step is too long for the estimator's sign gain (`rho` of the "
+        "velocity estimator): under Euler steps the sign term's chattering in the estimate "
+        "would exceed the bound the estimator declares for it (`step_bounds`), so the "
+        "estimate would be mostly chatter. Use a smaller `dt` or a smaller gain."
+    )
 
 
 def raise_or_keep(result, x, throw: bool):

@@ -266,3 +266,22 @@ def test_bad_input_names_the_argument(no_jaxtyping, scenes):
     for args, kwargs, match in cases:
         with pytest.raises(ValueError, match=match):
             find_homography_robust(*args, **kwargs)
+
+
+def test_covariance_predicts_the_spread_over_noise_seeds():
+    """`cov` (the inliers' transfer errors, $\\hat\\sigma^2 (J^TJ)^{-1}$) against the spread
+    of the eight entries of `H` over 200 noise seeds at 0.5 px, with 10% outliers: each
+    predicted standard deviation within 20% of the Monte-Carlo one."""
+    rng = np.random.default_rng(11)
+    H, src, dst0, truth = _scene(rng, 0.1, noise=0.0)
+    seeds = 200
+    dst = np.repeat(dst0[None], seeds, 0)
+    dst[:, truth] += 0.5 * rng.standard_normal((seeds, int(truth.sum()), 2))
+    keys = jax.random.split(jax.random.key(3), seeds)
+    est = robust_batch(keys, np.repeat(src[None], seeds, 0), dst)
+    assert np.all(_ok(est.result))
+    h = np.asarray(est.H).reshape(seeds, 9)[:, :8]
+    mc = np.std(h, axis=0, ddof=1)
+    predicted = np.sqrt(np.median(np.diagonal(np.asarray(est.cov), axis1=1, axis2=2), 0))
+    np.testing.assert_allclose(predicted / mc, 1.0, atol=0.2)
+    assert np.all(np.isfinite(est.cov))

@@ -33,6 +33,7 @@ from ._point_fit import (
 )
 from ._pose_fit import (
     FramePoses as FramePoses,
+    SmootherDiagnostics as SmootherDiagnostics,
     fit_bandwidth_hz as fit_bandwidth_hz,
     frame_poses as frame_poses,
     half_width_for_bandwidth as half_width_for_bandwidth,

@@ -22,8 +22,9 @@ from typing import Literal, final
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.flatten_util import ravel_pytree
 from jaxtyping import Array, Float
+
+from .._util import covariance as covariance
 
 
 @final
@@ -119,26 +120,3 @@ def huber(scale) -> Loss:
 def cauchy(scale) -> Loss:
     """The Cauchy (Lorentzian) loss with scale `scale` (module docstring)."""
     return Loss(kind="cauchy", scale=scale)
-
-
-def covariance(residuals, y, args, count) -> tuple:
-    """The covariance of the estimate `y` (a pytree) of `residuals(y, args)` (any shape;
-    the rows of unseen data zero), `count` the number of residual components that carry
-    data: $\\hat\\sigma^2 (J^T J)^{-1}$ (module docstring), in the order of `y`'s flattened
-    leaves.
-
-    **Returns:** `(cov (p, p), sigma2)`; NaN when there are not more residuals than
-    unknowns or $J^T J$ is singular."""
-    flat, unravel = ravel_pytree(y)
-    fun = lambda v: jnp.ravel(residuals(unravel(v), args))  # noqa: E731
-    J = jax.jacfwd(fun)(flat)
-    r = fun(flat)
-    p = flat.shape[0]
-    dof = jnp.asarray(count, r.dtype) - p
-    sigma2 = jnp.where(dof > 0, jnp.sum(r * r) / jnp.maximum(dof, 1.0), jnp.nan)
-    JTJ = J.T @ J
-    # scaled to unit diagonal before inverting (unknowns of different units)
-    d = jnp.sqrt(jnp.maximum(jnp.diag(JTJ), jnp.finfo(r.dtype).tiny))
-    inv = jnp.linalg.inv(JTJ / jnp.outer(d, d)) / jnp.outer(d, d)
-    cov = sigma2 * 0.5 * (inv + inv.T)
-    return cov, sigma2

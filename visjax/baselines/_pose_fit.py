@@ -52,6 +52,23 @@ class FramePoses(eqx.Module):
     cov: Float[Array, "*N 6 6"]
 
 
+@final
+class SmootherDiagnostics(eqx.Module):
+    """The diagnostics of `velocity_smoother`: `poses`, the `FramePoses` the fit used, and
+    `cov` (N, 6, 6), the covariance of each frame's $\\hat v = [v_e, \\omega_e]$ (camera
+    frame) propagated from the poses' covariances: the velocity is a linear combination
+    $\\sum_j c_j y_j$ of the window's poses, so
+    $\\operatorname{cov}(\\hat v_k) = \\sum_j c_j^2 C_j$ with $C_j$ frame $j$'s pose
+    covariance (`FramePoses.cov`, $\\hat\\sigma^2(J^TJ)^{-1}$ of the module docstring of
+    `_losses.py`) reordered to $[x_f, \\phi]$; first order in the rotations' errors,
+    frames independent. It is the spread from the pixel noise only, not the fit's bias (a
+    motion faster than its bandwidth). NaN where the velocity is, or where the poses have
+    no covariance (`refine=False`, fewer than four features seen)."""
+
+    poses: FramePoses
+    cov: Float[Array, "*N 6 6"]
+
+
 def object_features(camera: FixedCamera):
     """The features in the object frame, (n, 3), and $x_f^*$ from the fixed camera's
     reference image and constants (module docstring; Chitrakaran et al., eqs. (3)-(5))."""
@@ -98,7 +115,9 @@ def frame_poses(
     pixel is a feature not seen in that frame (at least four must be). Vmapped over
     frames; a frame that cannot be measured has its `result` and NaN pose. `loss`: `None`
     (least squares) or a robust `Loss` on each feature's pixel residual (`huber(k)`,
-    `cauchy(k)`, `k` in pixels): an outlier feature then weighs less. The covariance of
+    `cauchy(k)`, `k` in pixels): an outlier feature then weighs less; the fit is then
+    iteratively reweighted least squares from the homography's pose, refined by
+    Gauss-Newton on the rescaled residuals (`_losses.py`) from there. The covariance of
     each pose (`FramePoses.cov`) is $\\hat\\sigma^2(J^TJ)^{-1}$ of the (rescaled) residuals."""
     pixels, p_ref, A, R_star, s1, n_star, z1_star = _check(pixels, camera)
     loss = as_loss(loss)
@@ -125,10 +144,23 @@ def frame_poses(
         def robust(y, _):
             return loss(residuals(y, None))
 
+        def reweighted(y, _):
+            # each block weighted by psi(s)/s at the current residuals, held fixed in the
+            # step: Gauss-Newton on these is iteratively reweighted least squares
+            r = residuals(y, None)
+            return jnp.sqrt(jax.lax.stop_gradient(_irls_weight(loss, r)))[:, None] * r
+
         y0 = (jnp.zeros(3, A.dtype), x0)
         if refine:
+            code = RESULTS.successful
+            if loss.kind != "squared":
+                sol = optx.least_squares(reweighted, solver, y0, max_steps=max_steps, throw=False)
+                y0, code = sol.value, RESULTS.promote(sol.result)
+            # (least squares; or, from the reweighted fit's answer, the M-estimate itself:
+            # its derivatives with respect to the pixels are those of the loss)
             sol = optx.least_squares(robust, solver, y0, max_steps=max_steps, throw=False)
-            y, code = sol.value, RESULTS.promote(sol.result)
+            y = sol.value
+            code = RESULTS.where(code == RESULTS.successful, RESULTS.promote(sol.result), code)
             cov, _ = covariance(robust, y, None, 2 * jnp.sum(seen))
         else:
             y, code = y0, RESULTS.successful
@@ -149,6 +181,19 @@ def frame_poses(
         return FramePoses(R=R, x_f=x_f, rms_px=rms, result=result, cov=cov)
 
     return jax.vmap(one)(pixels)
+
+
+def _irls_weight(loss, r):
+    """`Loss.irls_weight`, $\\psi(s)/s$, of the residual blocks `r` (n, 2), $s$ their norms:
+    a Gauss-Newton step on the blocks weighted by its square root, the weights held fixed,
+    is a step of iteratively reweighted least squares on $\\sum_i \\rho(s_i)$ (its gradient
+    is the loss' own; Hartley and Zisserman, "Multiple View Geometry", app. A6.8).
+    Gauss-Newton on the rescaled blocks instead (the module docstring of `_losses.py`) all
+    but loses an outlier's radial direction from the Jacobian under the Cauchy loss, and
+    its steps can run off (measured: a frame of a track 20 px off at 0.5 px of noise ended
+    non-finite; from the reweighted fit's answer it converges in two or three steps)."""
+    s2 = jnp.sum(r * r, axis=-1)
+    return loss.irls_weight(jnp.where(s2 > 0, jnp.sqrt(jnp.where(s2 > 0, s2, 1.0)), 0.0))
 
 
 def reprojection_residuals(
@@ -213,10 +258,17 @@ def half_width_for_bandwidth(bandwidth_hz: float, dt: float, *, degree=2, causal
     return hi
 
 
-def _velocity_outputs(poses, ts, half_width, degree, causal):
+def _window_offsets(half_width, causal):
+    return jnp.arange(-2 * half_width, 1) if causal else jnp.arange(-half_width, half_width + 1)
+
+
+def _derivative_rows(ok, ts, half_width, degree, causal):
+    """Per frame $k$: the frames of its window (`idx` (N, W), clipped to the run), which of
+    them the fit uses (`use`), and the weights $c_j$ (N, W) of the fit's slope at $t_k$,
+    $\\hat y'(t_k) = \\sum_j c_j y_j$ (zero for a frame not used); NaN weights where frame
+    $k$ itself was not measured."""
     n = ts.shape[0]
-    offsets = jnp.arange(-2 * half_width, 1) if causal else jnp.arange(-half_width, half_width + 1)
-    ok = poses.result == RESULTS.successful
+    offsets = _window_offsets(half_width, causal)
 
     def at(k):
         idx = k + offsets
@@ -225,10 +277,6 @@ def _velocity_outputs(poses, ts, half_width, degree, causal):
         use = inside & ok[idx]
         tau = jnp.where(use, ts[idx] - ts[k], 0.0)
         scale = jnp.maximum(jnp.max(jnp.abs(tau)), jnp.finfo(ts.dtype).tiny)
-        R_k = jnp.where(ok[k], poses.R[k], jnp.eye(3, dtype=ts.dtype))
-        R_j = jnp.where(use[:, None, None], poses.R[idx], jnp.eye(3, dtype=ts.dtype))
-        rot = jax.vmap(lambda R: so3_log(R @ R_k.T))(R_j)  # exp(rot) R_k = R_j
-        pos = jnp.where(use[:, None], poses.x_f[idx], 0.0)
         V = jnp.stack([(tau / scale) ** d for d in range(degree + 1)], axis=1)
         w = use.astype(ts.dtype)
         count = jnp.sum(use)
@@ -236,13 +284,67 @@ def _velocity_outputs(poses, ts, half_width, degree, causal):
         # count - 1; one frame gives a zero slope (no motion seen yet)
         unused = (jnp.arange(degree + 1) >= count).astype(ts.dtype)
         G = (V * w[:, None]).T @ V + jnp.diag(unused)
-        coef = jnp.linalg.solve(G, (V * w[:, None]).T @ jnp.concatenate([pos, rot], 1))
-        v = coef[1] / scale  # d/dt at tau = 0
-        v = jnp.where((count >= 1) & ok[k], v, jnp.nan)
+        c = jnp.linalg.solve(G, (V * w[:, None]).T)[1] / scale  # d/dt at tau = 0
+        c = jnp.where(use, c, 0.0)
+        return idx, use, jnp.where((count >= 1) & ok[k], c, jnp.nan)
+
+    return jax.vmap(at)(jnp.arange(n))
+
+
+def _velocity_outputs(poses, ts, half_width, degree, causal):
+    ok = poses.result == RESULTS.successful
+    idx, use, c = _derivative_rows(ok, ts, half_width, degree, causal)
+
+    def at(k, idx, use, c):
+        R_k = jnp.where(ok[k], poses.R[k], jnp.eye(3, dtype=ts.dtype))
+        R_j = jnp.where(use[:, None, None], poses.R[idx], jnp.eye(3, dtype=ts.dtype))
+        rot = jax.vmap(lambda R: so3_log(R @ R_k.T))(R_j)  # exp(rot) R_k = R_j
+        pos = jnp.where(use[:, None], poses.x_f[idx], 0.0)
+        v = c @ jnp.concatenate([pos, rot], 1)
         R = poses.R[k]
         return VelocityOutput(v_hat=v, v_object=jnp.concatenate([R.T @ v[:3], R.T @ v[3:]]))
 
-    return jax.vmap(at)(jnp.arange(n))
+    return jax.vmap(at)(jnp.arange(ts.shape[0]), idx, use, c)
+
+
+def _velocity_covariance(poses, ts, half_widths, degree, causal):
+    """The covariance (N, 6, 6) of the fitted velocity $[v_e, \\omega_e]$, component $i$ from
+    the fit of half-width `half_widths[i]` (one per component; all equal for one fit).
+
+    Each component is a linear combination of the window's poses, $\\hat v_{k,i} =
+    \\sum_j c^{(i)}_j y_{j,i}$ with $y_j = [x_{f,j}, \\log(R_j R_k^T)]$. To first order in
+    the rotations' errors ($R_j = e^{[\\delta\\phi_j]_\\times}\\bar R_j$, `FramePoses.cov`),
+    $\\log(R_j R_k^T)$ moves by $\\delta\\phi_j - \\delta\\phi_k$ over a window short
+    enough that the relative rotations are small, and $\\sum_j c_j = 0$ (the slope of a
+    constant is zero) cancels $\\delta\\phi_k$; with independent frames,
+    $\\operatorname{cov}(\\hat v_{k,i}, \\hat v_{k,l}) = \\sum_j c^{(i)}_j c^{(l)}_j
+    C_{j,il}$, $C_j$ frame $j$'s pose covariance ($\\hat\\sigma^2(J^TJ)^{-1}$, the module
+    docstring of `_losses.py`) reordered to $[x_f, \\phi]$. Computed by a scan over the
+    window's offsets (memory O(N), not O(N x window))."""
+    ok = poses.result == RESULTS.successful
+    widest = max(half_widths)
+    rows = {}
+    for M in sorted(set(half_widths)):
+        idx, use, c = _derivative_rows(ok, ts, M, degree, causal)
+        # placed in the widest window: its offsets are the ends of the widest one's
+        pad = 2 * (widest - M)
+        before, after = (pad, 0) if causal else (pad // 2, pad // 2)
+        rows[M] = jnp.pad(c, ((0, 0), (before, after)))
+    n = ts.shape[0]
+    idx = jnp.clip(jnp.arange(n)[:, None] + _window_offsets(widest, causal)[None], 0, n - 1)
+    c = jnp.stack([rows[M] for M in half_widths], axis=-1)  # (N, W', 6)
+    order = jnp.array([3, 4, 5, 0, 1, 2])  # [phi, x_f] -> [x_f, phi]
+    C = poses.cov[:, order][:, :, order]
+
+    def add(total, column):
+        j, cj = column
+        pair = cj[:, :, None] * cj[:, None, :]
+        # a frame outside the fit has zero weight (and maybe a NaN covariance)
+        return total + pair * jnp.where(pair != 0.0, C[j], 0.0), None
+
+    total = jnp.zeros((n, 6, 6), ts.dtype)
+    total, _ = jax.lax.scan(add, total, (idx.T, jnp.moveaxis(c, 1, 0)))
+    return total  # NaN where frame k's velocity is (its weights are NaN)
 
 
 def velocity_smoother(
@@ -255,6 +357,7 @@ def velocity_smoother(
     degree: int = 2,
     sample_interval: float | None = None,
     poses: FramePoses | None = None,
+    loss=None,
     throw: bool = True,
 ) -> Solution:
     """The velocity as the derivative of a local least-squares polynomial fit of the pose
@@ -274,12 +377,16 @@ def velocity_smoother(
     at most `degree` in time over each window, e.g. a constant twist. At the start of a
     causal fit, fewer than `degree + 1` frames lower the degree (one frame: zero velocity,
     no motion seen yet). `poses`: the `frame_poses` of these pixels, if already computed
-    (e.g. for fits at several bandwidths).
+    (e.g. for fits at several bandwidths). `loss`: the loss of each feature's pixel
+    residual in the pose fits (`frame_poses`; `None`, least squares, or a robust `Loss`
+    such as `cauchy(k)`, `k` in pixels, for tracks with outliers); give it to `frame_poses`
+    instead when passing `poses`.
 
     **Returns:** a `Solution` with `ts`, `outputs` a `VelocityOutput` per frame,
-    `diagnostics` the `FramePoses`, `result` the first failed frame's code (a frame that
-    cannot be measured, or a window with too few measured frames; NaN there) and
-    `failed_sample`.
+    `diagnostics` a `SmootherDiagnostics` (the `FramePoses`, and the covariance of each
+    frame's $\\hat v$ propagated from theirs), `result` the first failed frame's code (a
+    frame that cannot be measured, or a window with too few measured frames; NaN there)
+    and `failed_sample`.
     """
     ts = as_float(ts)
     check_shape(ts, (jnp.shape(pixels)[0],), "ts")
@@ -292,8 +399,13 @@ def velocity_smoother(
     dt = float(sample_interval)
     M = half_width_for_bandwidth(bandwidth_hz, dt, degree=degree, causal=causal)
     if poses is None:
-        poses = frame_poses(pixels, camera)
+        poses = frame_poses(pixels, camera, loss=loss)
+    elif loss is not None:
+        raise ValueError(
+            "give `loss` to `frame_poses` when passing `poses` (the poses are already fitted)."
+        )
     outputs = _velocity_outputs(poses, ts, M, degree, causal)
+    cov = _velocity_covariance(poses, ts, (M,) * 6, degree, causal)
     good = jnp.all(jnp.isfinite(outputs.v_hat), axis=1)
     first = jnp.argmin(good)
     frame_result = _at(poses.result, first)
@@ -301,7 +413,8 @@ def velocity_smoother(
     result = RESULTS.where(jnp.all(good), RESULTS.successful, code)
     failed = jnp.where(jnp.all(good), -1, first)
     outputs = raise_or_keep(result, outputs, throw)
-    return baseline_solution(ts, outputs, result, failed, poses)
+    diagnostics = SmootherDiagnostics(poses=poses, cov=cov)
+    return baseline_solution(ts, outputs, result, failed, diagnostics)
 
 
 def _at(result, k):

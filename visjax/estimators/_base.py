@@ -2,11 +2,11 @@
 
 An estimator is a final `eqx.Module` whose fields are its gains and constants (arrays, so
 that a new value never recompiles). It has `init(y0)`, `vector_field(t, state, y)`,
-`output(t, state, y)`, optionally `diagnostics`, `valid`, `checks` and `max_stable_dt`, and
-a `jump` if it is an `AbstractJumpEstimator`. `run` integrates it on a time grid of its own
-(`dt`), holds each measurement sample from its arrival to the next (zero-order hold), fires
-`jump` when a new sample arrives, checks the state after every step, and returns a
-`Solution` that always carries a result code.
+`output(t, state, y)`, optionally `diagnostics`, `valid`, `checks`, `max_stable_dt` and
+`step_bounds`, and a `jump` if it is an `AbstractJumpEstimator`. `run` integrates it on a
+time grid of its own (`dt`), holds each measurement sample from its arrival to the next
+(zero-order hold), fires `jump` when a new sample arrives, checks the state after every
+step, and returns a `Solution` that always carries a result code.
 """
 
 import abc
@@ -23,6 +23,21 @@ from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from .._results import RESULTS, all_finite, first_failure
 from .._util import chunked_map
+
+MAX_STEPS = 10**8
+"""The most integration steps `run` (and `integration_step`) accept for one run: 1e8
+steps are about a minute of the velocity estimator's loop on a CPU (~0.5 us per step) and
+0.8 GB per saved float; more is a step far smaller than meant (a gain whose stability
+bound needs it), refused with a `ValueError` before anything is compiled or allocated."""
+
+MAX_SAVED_BYTES = 2**32
+"""The most bytes of saved signals (`SaveAt`'s outputs, diagnostics, states and their
+times) `run` accepts for one run (4 GiB; a `vmap`ped batch multiplies it): beyond it a
+`ValueError` before anything is allocated (save every n-th step, or use a reducer).
+Measured from the shapes (nothing is computed) for runs that save `2**16` steps or more:
+below that count, reaching it would take 64 KiB per saved step."""
+
+_SIZE_FROM = 2**16  # the saved steps from which `run` measures the saved bytes
 
 
 class AbstractEstimator(eqx.Module):
@@ -49,6 +64,14 @@ class AbstractEstimator(eqx.Module):
     - `max_stable_dt(y) -> float array`: the largest Euler step that is stable for the
         gains (evaluated at the first sample); the runner refuses a larger step.
         Default: `inf`.
+    - `step_bounds(y, sample_dt) -> tuple[(bound, what, why, result), ...]`: every bound
+        on the Euler step, each with what sets it (a gain's name), what exceeding it does,
+        and its result code; evaluated at the first sample `y` of a stream whose mean
+        sample interval is `sample_dt`. The runner refuses a step above any of them (a
+        `ValueError` naming the bound when concrete, the bound's result code under `jit`),
+        and `integration_step` keeps below all of them. Default: `max_stable_dt(y)` alone,
+        `RESULTS.unstable_step`. An estimator overrides it when another gain bounds the
+        step too (the velocity estimator's sign gain `rho`: its chattering).
 
     Discrete updates when a new sample arrives (covariance resetting, a filter's
     measurement update) are a declared capability: subclass `AbstractJumpEstimator` and
@@ -82,6 +105,22 @@ class AbstractEstimator(eqx.Module):
     def max_stable_dt(self, y: PyTree) -> Float[Array, ""]:
         """The largest stable Euler step for these gains (default: no bound)."""
         return jnp.array(jnp.inf)
+
+    def step_bounds(
+        self, y: PyTree, sample_dt: Float[Array, ""]
+    ) -> tuple[tuple[Float[Array, ""], str, str, RESULTS], ...]:
+        """Every bound on the Euler step as `(bound, what, why, result)`: the largest step
+        (s), what sets it ("the Euler stability bound", "the chattering bound of `rho`"),
+        what a larger step does ("the run would diverge") and the result code of a run
+        that exceeds it. Default: `max_stable_dt(y)` alone."""
+        return (
+            (
+                self.max_stable_dt(y),
+                "the Euler stability bound",
+                "the run would diverge",
+                RESULTS.unstable_step,
+            ),
+        )
 
 
 class AbstractJumpEstimator(AbstractEstimator):
@@ -441,11 +480,91 @@ def _n_steps(ts, dt) -> int:
     return int(math.floor(span / dt * (1 + 1e-12) + 1e-9)) + 1
 
 
+def _sample_interval(ts):
+    """The mean sample interval $(t_{N-1} - t_0)/(N - 1)$ (what `step_bounds` is told)."""
+    return (ts[-1] - ts[0]) / (ts.shape[0] - 1)
+
+
 @eqx.filter_jit
-def _first_bound(estimator, stream):
-    """`estimator.max_stable_dt` at the first sample, compiled: a bound that does not
-    depend on the sample does not compute it (one program, not an eager op per line)."""
-    return estimator.max_stable_dt(stream.measurement(0))
+def _first_bounds(estimator, stream):
+    """`estimator.step_bounds` at the first sample, compiled: a bound that does not
+    depend on the sample does not compute it (one program, not an eager op per line).
+    The texts and result codes pass through as they are."""
+    return estimator.step_bounds(stream.measurement(0), _sample_interval(stream.ts))
+
+
+def _step_message(estimator, h, bound, what, why) -> str:
+    return (
+        f"the integration step {float(h):.4g} s exceeds {what}, {float(bound):.4g} s for "
+        f"{type(estimator).__name__}'s gains: {why}. Pass a smaller `dt` (the measurements "
+        "are held between samples)."
+    )
+
+
+def _saved_bytes(estimator, stream, saveat, state0, n_saved: int) -> int:
+    """The bytes `run` would allocate for `n_saved` saved steps (shapes only: nothing is
+    computed). Per run: under `vmap` each element's."""
+
+    def one(estimator, stream, state0):
+        y0 = stream.measurement(0)
+        state = estimator.init(y0) if state0 is None else state0
+        t0 = stream.ts[0]
+        return (
+            estimator.output(t0, state, y0) if saveat.outputs else None,
+            estimator.diagnostics(t0, state, y0) if saveat.diagnostics else None,
+            state if saveat.states else None,
+            t0,
+        )
+
+    shapes = eqx.filter_eval_shape(one, estimator, stream, state0)
+    per_step = sum(
+        math.prod(x.shape) * np.dtype(x.dtype).itemsize for x in jax.tree_util.tree_leaves(shapes)
+    )
+    return n_saved * per_step
+
+
+def _size_message(estimator, stream, dt, n_steps: int, saved) -> str:
+    """Why a run is refused for its size, with the step bound that sets the step, if any."""
+    ts = _concrete(stream.ts)
+    span = "the stream" if ts is None else f"{float(ts[-1] - ts[0]):.4g} s"
+    grid = "the sample times" if dt is None else f"dt = {dt:.4g} s"
+    size = "" if saved is None else f" and about {saved / 1e9:.3g} GB for the saved outputs"
+    count = f"{n_steps:,}" if n_steps < 10**12 else f"{n_steps:.3g}"
+    text = (
+        f"the run would take {count} integration steps ({grid} over {span}){size}, more "
+        f"than the limits (`MAX_STEPS` = {MAX_STEPS:.0e} steps, `MAX_SAVED_BYTES` = "
+        f"{MAX_SAVED_BYTES / 1e9:.3g} GB of saved outputs per run)."
+    )
+    bounds = []
+    if estimator is not None and dt is not None:
+        for b, what, _, _ in _first_bounds(estimator, stream):
+            b = _concrete(b)
+            if b is not None and math.isfinite(float(b)):
+                bounds.append((float(b), what))
+    # a step between a quarter of the smallest bound and the bound follows from it
+    # (`integration_step` takes half); one far below it was chosen by the caller
+    if bounds and 0.25 * min(bounds)[0] <= dt <= min(bounds)[0] * (1 + 1e-9):
+        b, what = min(bounds)
+        return (
+            f"{text} The step follows from {what} of {type(estimator).__name__}, "
+            f"{b:.4g} s at these gains (`integration_step` takes half of it): a gain so "
+            "large that its bound needs this step? Check the gains (a `K` or `rho` far "
+            "larger than intended)."
+        )
+    if n_steps > MAX_STEPS:
+        return f"{text} Check `dt` (is it in seconds?), or split the stream."
+    return f"{text} Save every n-th step (`SaveAt(every=...)`) or use a reducer."
+
+
+def _check_size(estimator, stream, dt, n_steps: int, saveat, state0):
+    """Refuse, before anything is compiled or allocated, a run of more than `MAX_STEPS`
+    steps or more than `MAX_SAVED_BYTES` of saved signals."""
+    saved = None
+    n_saved = len(range(0, n_steps, saveat.every)) if saveat.any else 0
+    if n_saved >= _SIZE_FROM:  # (tracing the shapes costs ~0.1 s: not for short runs)
+        saved = _saved_bytes(estimator, stream, saveat, state0, n_saved)
+    if n_steps > MAX_STEPS or (saved is not None and saved > MAX_SAVED_BYTES):
+        raise ValueError(_size_message(estimator, stream, dt, n_steps, saved))
 
 
 @eqx.filter_jit
@@ -469,17 +588,17 @@ def _precheck(estimator, stream, h_max, solver):
         if ok is not None and not ok:
             raise ValueError(f"{type(estimator).__name__}: {message}")
     if isinstance(solver, diffrax.Euler):
-        bound = _concrete(_first_bound(estimator, stream))
         h = _concrete(h_max)
-        if bound is None or h is None or h <= bound:
+        if h is None:
             return
-        # a non-finite first sample is reported by the run's result, not as a step error
-        if _concrete(_first_finite(stream)):
-            raise ValueError(
-                f"the integration step {float(h):.4g} s exceeds the Euler stability bound "
-                f"{float(bound):.4g} s of {type(estimator).__name__}'s gains: the run would "
-                "diverge. Pass a smaller `dt` (the measurements are held between samples)."
-            )
+        for bound, what, why, _ in _first_bounds(estimator, stream):
+            bound = _concrete(bound)
+            if bound is None or h <= bound:
+                continue
+            # a non-finite first sample is reported by the run's result, not as a step error
+            if _concrete(_first_finite(stream)):
+                raise ValueError(_step_message(estimator, h, bound, what, why))
+            return
 
 
 def integration_step(
@@ -488,10 +607,13 @@ def integration_step(
     """The integration step `dt` for `run`: the one rule visjax uses when a step is not given.
 
     `None` (integrate at the sample times) when every sample interval is within both
-    `max_step` and the Euler stability bound of the estimator's gains
-    (`estimator.max_stable_dt` at the first sample); otherwise a fixed step of
-    `min(max_step, bound / 2)`, the samples held between steps. Half the bound keeps a margin
-    where the bound is a worst case met at its edge.
+    `max_step` and the step bounds of the estimator's gains (`estimator.step_bounds` at the
+    first sample: the Euler stability bound `max_stable_dt`, and any other the estimator
+    declares); otherwise a fixed step of `min(max_step, bound / 2)`, the samples held
+    between steps. Half the bound keeps a margin where the bound is a worst case met at its
+    edge. A step that would need more than `MAX_STEPS` integration steps over the stream
+    raises a `ValueError` naming the bound that sets it (a gain far larger than intended),
+    before anything is allocated.
 
     **Arguments:**
 
@@ -510,18 +632,24 @@ def integration_step(
     longest = float(np.max(np.diff(ts)))
     bound = math.inf
     if estimator is not None:
-        bound = float(_concrete(_first_bound(estimator, stream)))
-        if not (bound > 0):
-            raise ValueError(
-                f"{type(estimator).__name__}'s Euler stability bound is {bound!r}: no stable "
-                "step exists for these gains."
-            )
+        for b, what, _, _ in _first_bounds(estimator, stream):
+            b = float(_concrete(b))
+            if not (b > 0):
+                raise ValueError(
+                    f"{type(estimator).__name__}: {what} is {b!r} s, no stable step exists "
+                    "for these gains."
+                )
+            bound = min(bound, b)
     cap = math.inf if max_step is None else float(max_step)
     if not cap > 0:
         raise ValueError(f"`max_step` must be positive or None; got {max_step!r}.")
     if longest <= min(cap, bound):
         return None
-    return min(cap, 0.5 * bound)
+    dt = min(cap, 0.5 * bound)
+    n_steps = _n_steps(ts, dt)
+    if n_steps > MAX_STEPS:
+        raise ValueError(_size_message(estimator, stream, dt, n_steps, None))
+    return dt
 
 
 def _unroll(unroll: int, length: int) -> int:
@@ -577,9 +705,14 @@ def run(
     After every step the runner checks the held sample (finite), the new state (finite,
     `estimator.valid`) and the solver's own result; the first failure sets
     `Solution.result` and `Solution.failed_sample` and freezes the state. Before the loop,
-    `estimator.checks()` (gains and constants) and, for Euler, the step against
-    `estimator.max_stable_dt(y_0)`; when these are concrete they raise `ValueError`
-    before anything runs.
+    `estimator.checks()` (gains and constants) and, for Euler, the step against every
+    bound of `estimator.step_bounds(y_0, mean sample interval)` (the Euler stability bound
+    `max_stable_dt`, and e.g. the velocity estimator's chattering bound of `rho`); when
+    these are concrete they raise `ValueError` before anything runs, else the run's result
+    is the bound's code (`unstable_step`, `chattering_step`). Before anything is compiled
+    or allocated, a run of more than `MAX_STEPS` integration steps, or whose saved signals
+    would take more than `MAX_SAVED_BYTES`, raises a `ValueError` that gives the count, the
+    size and the step bound that set the step, if one did.
 
     **Arguments:**
 
@@ -623,6 +756,7 @@ def run(
         raise ValueError("`stream.present[0]` is False: the first sample must be present.")
     h_max = jnp.max(jnp.diff(stream.ts)) if dt is None else jnp.asarray(dt)
     _precheck(estimator, stream, h_max, solver)
+    _check_size(estimator, stream, dt, n_steps, saveat, state0)
     plan = None if stream.measure is None else _chunk_plan(stream, dt, n_steps, saveat, adjoint)
     return _run(
         estimator, stream, dt, n_steps, plan, solver, saveat, reducer, adjoint, state0, throw,
@@ -729,13 +863,15 @@ def _run(
     def begin(y0, y0_finite):
         """The initial state, reducer and result code from the first sample `y0`."""
         state = estimator.init(y0) if state0 is None else state0
-        stable = jnp.array(True)
-        if isinstance(solver, diffrax.Euler):
-            stable = h_max <= jax.lax.stop_gradient(estimator.max_stable_dt(y0))
         r = RESULTS.successful
         r = RESULTS.where(~(all_finite(state) & estimator.valid(state, y0)), RESULTS.diverged, r)
         r = RESULTS.where(~all_finite(state), RESULTS.nonfinite_state, r)
-        r = RESULTS.where(~stable, RESULTS.unstable_step, r)
+        if isinstance(solver, diffrax.Euler):
+            # every step bound the estimator declares (the first listed wins: the Euler
+            # stability bound of the default); NaN is not within a bound
+            for bound, _, _, code in reversed(estimator.step_bounds(y0, _sample_interval(ts))):
+                stable = h_max <= jax.lax.stop_gradient(bound)
+                r = RESULTS.where(stable, r, code)
         # a bad first sample is named as such, not by the step bound computed from it
         r = RESULTS.where(~y0_finite, RESULTS.nonfinite_measurement, r)
         if stream.present is not None:

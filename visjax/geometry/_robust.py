@@ -25,7 +25,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float, PRNGKeyArray, Real
 
 from .._results import RESULTS, raise_or_keep
 from .._small import det3
-from .._util import as_float, check_points
+from .._util import as_float, check_points, covariance
 from ._homography import (
     _design,
     _four_point,
@@ -56,11 +56,16 @@ class RobustHomography(eqx.Module):
         `False` when `result` is not successful.
     - `result`: a `RESULTS` item (always `successful` when the call was made with
         `throw=True`, since a failure raises).
+    - `cov`: the covariance of the eight free entries of `H` (row by row, $h_{33} = 1$
+        fixed), $\\hat\\sigma^2 (J^TJ)^{-1}$ of the inliers' transfer errors at `H` ($J$
+        their Jacobian in the eight entries, $\\hat\\sigma^2$ their sum of squares over
+        $2m - 8$ for $m$ inliers); shape (8, 8), NaN when `result` is not successful.
     """
 
     H: Float[Array, "3 3"]
     inliers: Bool[Array, " n"]
     result: RESULTS
+    cov: Float[Array, "8 8"]
 
 
 def find_homography_robust(
@@ -344,5 +349,19 @@ def _robust(key, src, dst, threshold, iterations: int, throw: bool):
         ),
     )
     ok = result == RESULTS.successful
-    out = RobustHomography(H=jnp.where(ok, H, jnp.nan), inliers=inliers & ok, result=result)
+
+    def transfer(h, _):  # the inliers' forward transfer errors, (n, 2), zero elsewhere
+        Hh = jnp.concatenate([h, jnp.ones((1,), dtype)]).reshape(3, 3)
+        q = src @ Hh[:, :2].T + Hh[None, :, 2]
+        w = jnp.where(inliers, q[:, 2], 1.0)
+        return jnp.where(inliers[:, None], q[:, :2] / w[:, None] - dst, 0.0)
+
+    h_safe = jnp.where(ok, H, jnp.eye(3, dtype=dtype)).reshape(-1)[:8]
+    cov, _ = covariance(transfer, h_safe, None, 2 * jnp.sum(inliers))
+    out = RobustHomography(
+        H=jnp.where(ok, H, jnp.nan),
+        inliers=inliers & ok,
+        result=result,
+        cov=jnp.where(ok, cov, jnp.nan),
+    )
     return raise_or_keep(result, out, throw)
