@@ -90,6 +90,10 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "would exceed the bound the estimator declares for it (`step_bounds`), so the "
         "estimate would be mostly chatter. Use a smaller `dt` or a smaller gain."
     )
+    too_many_dropped_frames = (
+        "More than `visjax.io.MAX_DROPPED_FRACTION` of the frames have a feature missing "
+        "(`dropped_fraction()`): the estimate rests mostly on held or extrapolated frames."
+    )
 
 
 def raise_or_keep(result, x, throw: bool):

@@ -73,10 +73,25 @@ def _formats(text: str) -> list[str]:
 
 
 def _grid_spec(text: str) -> str:
+    """A `--grid` spec that parses (`studies.parse_grid`), of at most `verbs.MAX_RUNS`
+    points (counted from the text first: nothing that large is built), every value
+    finite. Names and signs need the problem: `verbs.check_study`."""
+    from .verbs import MAX_RUNS, grid_size
+
+    size = grid_size(text)
+    if size is not None and size > MAX_RUNS:
+        raise argparse.ArgumentTypeError(
+            f"the grid {text!r} has {size:.3g} points, more than one command runs ({MAX_RUNS:.0e})"
+        )
     try:
-        importlib.import_module("visjax.studies").parse_grid(text)
+        points = importlib.import_module("visjax.studies").parse_grid(text)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
+    for name, values in points.items():
+        if not all(math.isfinite(v) for v in values):
+            raise argparse.ArgumentTypeError(
+                f"grid axis {name!r} has a value that is not finite in {text!r}"
+            )
     return text
 
 
@@ -136,7 +151,7 @@ def _verb(sub, name, help, *, seeds, noise, grid):
     _arg(p, "--duration", _positive, None, "seconds of the problem's scene")
     _arg(p, "--rate", _positive, None, "sample rate of the scene, Hz (if it has one)")
     _arg(p, "--set", None, None, "a variant (moving_point: I.1 ... II.3)", action="append")
-    robust = "the problem's robust settings (static_points: robust losses, an outlier gate)"
+    robust = "the problem's robust settings (robust losses, outlier gates; not moving_point)"
     _arg(p, "--robust", help=robust, action="store_true")
     if grid:
         _arg(p, "--grid", _grid_spec, None, 'e.g. "K_scale=1e-2:1e1:8,rho_scale=0.1/1"')
@@ -286,28 +301,58 @@ def _check(a) -> None:
         raise argparse.ArgumentTypeError(f"video {a.video!r}: no such file")
     if getattr(a, "data", None) is not None and not Path(a.data).is_file():
         raise argparse.ArgumentTypeError(f"--data {a.data!r}: no such file")
+    if a.command in ("compare", "sweep", "tune"):
+        _check_study(a)
+
+
+def _check_study(a) -> None:
+    """A study's size and grid, before any compile (`verbs.check_study`: the run count,
+    the grid's parameter names and values on the built problem, a lower bound of the
+    memory it needs)."""
+    from .verbs import Refused, check_study
+
+    shard = getattr(a, "shard", None)
+    try:
+        check_study(
+            a.command, a.problem, grid=getattr(a, "grid", None), seeds=a.seeds,
+            chunk=getattr(a, "chunk", 64), steps=getattr(a, "steps", 0), data=a.data,
+            noise=a.noise, duration=a.duration, rate=a.rate, variants=a.set, robust=a.robust,
+            shard=shard if isinstance(shard, tuple) else None,
+        )  # fmt: skip
+    except Refused as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
 
 
 def main(argv=None) -> int:
     """Parse and validate every option before any work (one line and exit status 2 on a
     bad one), then run the command into a temporary folder beside `--out` and move its
-    files into place only when it succeeded: a failure leaves nothing half-written."""
+    files into place only when it succeeded: a failure leaves nothing half-written.
+
+    A run that did not succeed (`visjax.report.RunFailed`: a failed run of a command that
+    is one run, `velocity|moving_point|static_points --data` and `run`, or a data file
+    with too many frames missing) exits with status 1 and one line naming its result code;
+    its files, written before, are kept (its summary records the code). A failure that
+    stops a command before its files (a paper's simulation that fails) leaves nothing.
+    Commands over many runs (`compare`, `sweep`, `tune`) record each run's code and exit
+    with 0."""
     from ._xla_workaround import apply_xla_cpu_workarounds
 
     apply_xla_cpu_workarounds()  # the command line's own choice; `import visjax` sets nothing
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        _check(args)
-    except argparse.ArgumentTypeError as e:
-        parser.error(str(e))
     from .io import DataFormatError, staged_output
     from .io._staging import OutputConflictError
+    from .report import RunFailed
 
+    failed = None
     try:
         with _terminated_as_interrupt():
+            try:
+                _check(args)
+            except argparse.ArgumentTypeError as e:
+                parser.error(str(e))
             if args.out is None:
-                _call(args)
+                failed = _run(args, RunFailed)
             else:
                 file = getattr(args, "out_is_file", False)
                 force = bool(getattr(args, "force", False))
@@ -317,18 +362,36 @@ def main(argv=None) -> int:
                     args.out, file=file, command=args.command, force=force, slot=slot
                 ) as st:
                     args.out = str(st)
-                    _call(args)
-        return 0
+                    failed = _run(args, RunFailed)
     except (DataFormatError, OutputConflictError) as e:  # a bad file, an --out in use: usage
         sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
         return 2
-    except (ValueError, RuntimeError) as e:  # a failed run: one line
+    except ValueError as e:
+        from .verbs import Refused  # a study too large for this machine, found as it starts
+
+        sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
+        return 2 if isinstance(e, Refused) else 1
+    except RuntimeError as e:  # a failed run: one line
         sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
         return 1
     except _Interrupted as e:
         where = "" if args.out is None else "; nothing was written to --out"
         sys.stderr.write(f"visjax: interrupted by {e.name}{where}\n")
         return 128 + e.signum
+    if failed is not None:  # its files are in place: the run's result code, one line
+        sys.stderr.write(f"visjax: error: {_one_line(failed)}\n")
+        return 1
+    return 0
+
+
+def _run(args, run_failed):
+    """The command; a run that did not succeed (`run_failed`) is returned, not raised, so
+    that its files move into place."""
+    try:
+        _call(args)
+    except run_failed as e:
+        return e
+    return None
 
 
 class _Interrupted(BaseException):

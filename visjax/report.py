@@ -17,10 +17,18 @@ import numpy as np
 FORMATS = ("png", "pdf", "svg")
 
 
+class RunFailed(RuntimeError):
+    """A command's run did not succeed: its result code is not `successful` (a failed run,
+    or a data file with too many frames missing). Raised after every file and the summary
+    (which records the result code) are written; its message is one line, e.g.
+    `velocity: the run failed: diverged at sample 123 (t = 0.123 s)`. The command line
+    prints it as `visjax: error: ...`, keeps the files and exits with status 1."""
+
+
 def _report(kind: str, settings: dict, out, formats, reproduce) -> dict:
     """Run `reproduce(write)` (a papers reproduction), writing its files into `out` as they
     come (nothing without `out`), then its summary; print its lines and the files written;
-    raise its failure, if any, after everything is written."""
+    raise its failure, if any, after everything is written (`RunFailed`)."""
     from ._util import command_x64
     from .io import command_summary, write_outputs
 
@@ -43,7 +51,7 @@ def _report(kind: str, settings: dict, out, formats, reproduce) -> dict:
         more = f" and {len(written) - 8} more" if len(written) > 8 else ""
         print(f"wrote {out}/: {shown}{more}")
     if rep.failure is not None:
-        raise RuntimeError(rep.failure)
+        raise RunFailed(rep.failure)
     return summary
 
 
@@ -89,7 +97,9 @@ def velocity_report(
 def velocity_data_report(path, out=None, quiet=False, filter_hz=None, formats=("png",)) -> dict:
     """The velocity estimator of Chitrakaran et al. on a user's `visjax.io.VelocityData`
     file (`papers.velocity_file_reproduction`): `summary.json` (kind `velocity_data`),
-    `estimate.npz` and `velocity.<format>`."""
+    `estimate.npz` and `velocity.<format>`. A run that fails, or a file whose frames miss a
+    feature in more than `visjax.io.MAX_DROPPED_FRACTION` of them, raises `RunFailed` once
+    they are written (the summary records the result code and `dropped_fraction`)."""
     from .papers import velocity_file_reproduction
 
     return _report(
@@ -104,7 +114,8 @@ def velocity_data_report(path, out=None, quiet=False, filter_hz=None, formats=("
 def moving_point_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
     """The unknown input observer of Jang's thesis on a user's `visjax.io.MovingPointData`
     file (`papers.moving_point_file_reproduction`): `summary.json` (kind
-    `structure_data`), `estimate.npz` and `structure.<format>`."""
+    `structure_data`), `estimate.npz` and `structure.<format>`; `RunFailed` as
+    `velocity_data_report`."""
     from .papers import moving_point_file_reproduction
 
     return _report(
@@ -119,7 +130,8 @@ def moving_point_data_report(path, out=None, quiet=False, formats=("png",)) -> d
 def static_points_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
     """The adaptive structure estimator of Nath et al. on a user's
     `visjax.io.StaticPointsData` file (`papers.static_points_file_reproduction`):
-    `summary.json` (kind `euclidean_data`), `estimate.npz` and `euclidean.<format>`."""
+    `summary.json` (kind `euclidean_data`), `estimate.npz` and `euclidean.<format>`;
+    `RunFailed` as `velocity_data_report`."""
     from .papers import static_points_file_reproduction
 
     return _report(

@@ -9,10 +9,18 @@ CSV) and figures into `out` when given (staged by the command line: `visjax.io`)
 with named variants (the thesis' experiment sets) is swept and tuned variant by variant
 (all of them unless `variants` names some), one folder each, with a top-level summary of
 kind `sets`.
+
+`run` is one run: when it does not succeed it raises `visjax.report.RunFailed` once its
+files are written. `compare`, `sweep` and `tune` are many runs: each run's result code is
+in their tables, and a failed run is not a failed command. `check_study` sizes a study
+before any work (`Refused`). With a data file in one of the papers' formats, every
+summary reports `dropped_fraction`.
 """
 
 import contextlib
+import difflib
 import functools
+import math
 import os
 import shutil
 import sys
@@ -23,6 +31,20 @@ import numpy as np
 
 from ._util import command_x64
 from .io import command_summary, figure_files
+
+MAX_RUNS = 10**9
+"""The most runs one study command makes (grid points x seeds, the held-out runs, the
+tuning's): far beyond any useful study, so that a count above it is a slip of the keyboard
+(refused at once, not found after hours)."""
+
+RECORD_BYTES = 1024
+"""Memory per record of `compare` (a dict of a dozen numbers and names), bytes."""
+
+
+class Refused(ValueError):
+    """A study the command line refuses before it runs (an unknown or invalid grid
+    parameter, more than `MAX_RUNS` runs, more memory than is available): one line, exit
+    status 2."""
 
 
 def _settings(arguments: dict) -> dict:
@@ -73,6 +95,162 @@ def problems(
     return [(None, build(None))]
 
 
+def grid_size(spec: str) -> int | None:
+    """The number of points of a `--grid` spec (the product of its axes' lengths), read
+    from the text without building the grid; `None` for a spec `parse_grid` refuses."""
+    size = 1
+    for part in [p.strip() for p in spec.split(",") if p.strip()]:
+        body = part.split("=", 1)[-1]
+        try:
+            n = int(body.split(":")[2]) if ":" in body else len(body.split("/"))
+        except (ValueError, IndexError):
+            return None
+        size *= max(n, 0)
+    return size
+
+
+def available_memory() -> float | None:
+    """Bytes of memory this process may still take: 80% of the memory available now
+    (`MemAvailable` of /proc/meminfo, else the free pages), as `studies.sweep`'s
+    `max_memory="available"` takes it; `None` where the system does not say."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return 0.8 * float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return 0.8 * float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _runs(command, points, seeds, steps, methods) -> int:
+    """The runs of one variant of a study: the grid over the seeds and the held-out runs
+    (sweep: the best point and the defaults; tune: also the tuned point, and `steps`
+    evaluations over the seeds); compare: every method over the seeds."""
+    if command == "compare":
+        return seeds * methods
+    if command == "sweep":
+        return points * seeds + 2 * seeds
+    return points * seeds + steps * seeds + 3 * seeds
+
+
+def _too_many(command, total, what) -> None:
+    if total > MAX_RUNS:
+        steps = ", fewer --steps" if command == "tune" else ""
+        grid = " or a coarser --grid" if command != "compare" else ""
+        raise Refused(
+            f"{command}: {what} make {total:.3g} runs, more than one command runs "
+            f"({MAX_RUNS:.0e}): use fewer --seeds{steps}{grid}"
+        )
+
+
+def _check_grid(name, problem, spec) -> dict:
+    """The grid's points, its parameter names among the problem's (the closest suggested)
+    and its values valid for them (finite; positive where the parameter must be)."""
+    from .studies import parse_grid
+    from .studies._problem import check_values
+
+    if not spec:
+        raise Refused(f"{problem.title} has no default grid: give --grid")
+    params = parse_grid(spec)
+    specs = problem.parameters()
+    for axis in params:
+        if axis not in specs:
+            lower = {k.lower(): k for k in specs}
+            close = difflib.get_close_matches(axis.lower(), list(lower), n=1)
+            hint = f" (did you mean {lower[close[0]]!r}?)" if close else ""
+            raise Refused(
+                f"--grid: {name} has no parameter {axis!r}{hint}; its parameters: "
+                f"{', '.join(sorted(specs))}"
+            )
+    try:
+        check_values(problem, params, f"--grid ({name})")
+    except ValueError as e:
+        raise Refused(" ".join(str(e).split())) from None
+    return params
+
+
+def _input_bytes(problem) -> int:
+    """Bytes of one run's noisy inputs (`problem.inputs`, traced, not run): the least one
+    run holds."""
+    import jax
+
+    shapes = jax.eval_shape(problem.inputs, jax.random.key(0))
+    leaves = jax.tree_util.tree_leaves(shapes)
+    return int(sum(math.prod(x.shape) * np.dtype(x.dtype).itemsize for x in leaves))
+
+
+def _memory(command, problem, params, seeds, chunk, methods, slices=1) -> tuple[int, str]:
+    """A lower bound of the memory the study needs at once, before any compile, and what
+    it is made of: the noisy inputs of a chunk of runs (sweep; tune: of every seed at once,
+    its gradient step is one call) and the table of every run (8 bytes a cell; a job's
+    slice of `slices`) or `compare`'s records."""
+    per_run = _input_bytes(problem)
+    if command == "compare":
+        records = seeds * methods * RECORD_BYTES
+        return per_run + records, f"{seeds * methods} records of {RECORD_BYTES} bytes"
+    points = len(next(iter(params.values())))
+    runs = points * seeds
+    batch = min(chunk, 1 << max(0, math.ceil(math.log2(runs))))
+    columns = 6 + sum(int(np.size(problem.parameters()[k].value)) for k in params)
+    table = math.ceil(runs / slices) * columns * 8
+    need, what = (
+        batch * per_run + table,
+        (f"{batch} runs' inputs of {per_run / 2**20:.3g} MiB and a table of {runs} runs"),
+    )
+    if command == "tune" and seeds * per_run > need:
+        need, what = seeds * per_run, f"{seeds} seeds' inputs of {per_run / 2**20:.3g} MiB"
+    return need, what
+
+
+def check_study(
+    command, problem, *, grid=None, seeds=1, chunk=64, steps=0, data=None, noise=0.1,
+    duration=None, rate=None, variants=None, robust=False, shard=None,
+) -> None:  # fmt: skip
+    """What the command line checks of `compare`, `sweep` and `tune` before any work:
+    the run count (at most `MAX_RUNS`; first from the grid's text, before the problem is
+    built), then on the built problem (cached: the command reuses it) the grid's
+    parameter names and values (`--grid`, or the problem's default), the run count again
+    and a lower bound of the memory the study needs (the noisy inputs of a chunk, the
+    table, of the job's slice with `shard=(i, N)`), against `available_memory()`. (The
+    sweep then measures a chunk's compiled program before it runs one: `studies.sweep`'s
+    `max_memory`, for `sweep` and `tune`.) **Raises:** `Refused`, one line; what building
+    the problem raises (a data file's `DataFormatError`)."""
+    if command not in ("compare", "sweep", "tune"):
+        return
+    count = 1 if grid is None else grid_size(grid)
+    n_variants = len(variants) if variants else 1
+    if count is not None:
+        points = f"{count} grid points x {seeds} seeds" if grid else f"{seeds} seeds"
+        points += f" and {steps} steps" if command == "tune" else ""
+        _too_many(command, n_variants * _runs(command, count, seeds, steps, 1), points)
+    command_x64()
+    from .studies import registered
+
+    entry = registered(problem)
+    every = command != "compare"
+    built = problems(entry.name, data, noise, duration, rate, variants, every, robust)
+    limit = available_memory()
+    total = 0
+    for tag, p in built:
+        where = entry.name if tag is None else f"{entry.name} [{tag}]"
+        params = {} if command == "compare" else _check_grid(where, p, grid or p.grid)
+        count = len(next(iter(params.values()))) if params else 1
+        total += _runs(command, count, seeds, steps, len(p.methods))
+        slices = shard[1] if isinstance(shard, tuple) else 1
+        need, what = _memory(command, p, params, seeds, chunk, len(p.methods), slices)
+        if limit is not None and need > limit:
+            raise Refused(
+                f"{command} {where}: needs at least {need / 2**20:.0f} MiB ({what}), more "
+                f"than the {limit / 2**20:.0f} MiB available to it (80% of the memory "
+                "available now): use a smaller --chunk, fewer --seeds or a coarser --grid"
+            )
+    _too_many(command, total, f"{len(built)} problem(s), their grids and {seeds} seeds")
+
+
 def _folder(out, tag):
     if out is None:
         return None
@@ -109,37 +287,55 @@ def run_command(
     """`visjax run PROBLEM`: one method (default the estimator) once, on the problem's
     scene or data file with `noise` px of pixel noise (seed `seed`); prints its result and
     metrics; writes `summary.json` (kind `run`), `estimates.parquet` (the saved outputs
-    over time, one column per component) and `run.<format>` (the problem's figure)."""
+    over time, one column per component) and `run.<format>` (the problem's figure). A run
+    that does not succeed (or one on a data file whose frames miss a feature in more than
+    `visjax.io.MAX_DROPPED_FRACTION` of them: `too_many_dropped_frames`) is written as
+    well, its result code in the summary and no metrics, then raises
+    `visjax.report.RunFailed`."""
     started = time.perf_counter()
     settings = _settings(locals())
     command_x64()
     import jax
 
     from ._results import result_names
+    from .report import RunFailed
     from .studies import as_json, solution
 
-    results = {}
+    results, failures = {}, []
+    dropped = _dropped(problem, data)
     for tag, p in problems(
         problem, data, noise, duration, rate, variants, every=False, robust=robust
     ):
         m = p.check_method(method)
         sol = jax.block_until_ready(solution(p, None, seed, method=m))
         code = result_names(sol.result)
+        failed_sample = int(np.asarray(getattr(sol, "failed_sample", -1)))
         values = jax.tree_util.tree_map(np.asarray, p.metrics(m, sol))
         ok = code == "successful" and all(np.all(np.isfinite(v)) for v in values.values())
+        head = f"[{tag}] " if tag else ""
+        failure = None
+        if code != "successful":
+            at = f" at sample {failed_sample}" if failed_sample >= 0 else ""
+            failure = f"run {problem}: {head}the run failed: {code}{at}"
+        elif dropped is not None and dropped["over"]:
+            code = dropped["result"]
+            failure = f"run {problem}: {head}the result is {code}: {dropped['line']}"
         body = {
             "problem": p.title,
             "method": m,
             "result": code,
-            "failed_sample": int(np.asarray(getattr(sol, "failed_sample", -1))),
+            "failed_sample": failed_sample,
             "metrics": as_json(values, ok),
             "gains": p.gains({}),
             "problem_settings": p.settings(),
         }
-        head = f"[{tag}] " if tag else ""
+        if dropped is not None:
+            body["dropped_fraction"] = dropped["fraction"]
         print(f"{head}{p.title}: {m}, {code}")
+        if dropped is not None:
+            print(f"{head}  {dropped['line']}")
         for k, v in body["metrics"].items():
-            print(f"{head}  {k} = {v}")
+            print(f"{head}  {k} = {'-' if v is None else v}")
         folder = _folder(out, tag)
         if folder is not None:
             import pandas as pd
@@ -152,7 +348,43 @@ def run_command(
         results[tag] = command_summary(
             "run", body, settings=settings, seed=seed, started=started, out=folder
         )
-    return _result(results, settings, seed, started, out)
+        if failure is not None:
+            failures.append(failure)
+    summary = _result(results, settings, seed, started, out)
+    if failures:
+        more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
+        raise RunFailed(failures[0] + more)
+    return summary
+
+
+def _dropped(problem, data) -> dict | None:
+    """The data file's frames with a feature missing, for a problem in one of the papers'
+    formats: `fraction`, `over` (above `visjax.io.MAX_DROPPED_FRACTION`), `result` (the
+    result code it makes of a successful run) and the printed `line`; `None` without a
+    data file or for a format of its own."""
+    if data is None:
+        return None
+    from .io import MAX_DROPPED_FRACTION
+    from .papers._files import DROPPED_RESULT, coverage_line, file_coverage
+    from .studies import registered
+
+    cover = file_coverage(registered(problem).name, data)
+    if cover is None:
+        return None
+    fraction, frames = cover
+    return {
+        "fraction": fraction,
+        "over": fraction > MAX_DROPPED_FRACTION,
+        "result": DROPPED_RESULT,
+        "line": coverage_line(fraction, frames),
+    }
+
+
+def _say_dropped(body: dict, dropped, head: str) -> None:
+    """`dropped_fraction` into a study's summary, and its line printed."""
+    if dropped is not None:
+        body["dropped_fraction"] = dropped["fraction"]
+        print(f"{head}{dropped['line']}")
 
 
 def _trajectory(sol) -> dict:
@@ -193,7 +425,8 @@ def compare_command(
     and seed, and `problem_settings`), `records.parquet`, `records.csv` and
     `comparison.<format>` (accuracy and latency with their spread over seeds), and prints
     the medians per method (and the predicted standard deviation where the problem has
-    one, `AbstractProblem.uncertainty`)."""
+    one, `AbstractProblem.uncertainty`). With a data file in one of the papers' formats,
+    `dropped_fraction` (each run's result code is its own: many runs, no failed command)."""
     started = time.perf_counter()
     settings = _settings(locals())
     command_x64()
@@ -203,6 +436,7 @@ def compare_command(
     from .plots import plot_comparison
 
     results = {}
+    dropped = _dropped(problem, data)
     for tag, p in problems(
         problem, data, noise, duration, rate, variants, every=False, robust=robust
     ):
@@ -218,6 +452,7 @@ def compare_command(
         head = f"[{tag}] " if tag else ""
         label = p.label or p.metric
         print(f"{head}{p.title}: {seeds} noise seed(s); {p.metric}: {label}")
+        _say_dropped(body, dropped, head)
         # the problem's predicted spread (`uncertainty`: keys `<metric>_std`), if any
         std_key = next((k for k in records[0] if k.endswith("_std")), None)
         std_head = f"{'predicted ' + std_key:>28}" if std_key else ""
@@ -338,15 +573,22 @@ def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0, **durab
     from . import studies
 
     spec, params = _grid(problem, grid)
-    table = studies.sweep(
-        problem,
-        params,
-        jnp.arange(first, first + seeds),
-        chunk=chunk,
-        mesh=mesh,
-        progress=not quiet,
-        **durable,
-    )
+    try:
+        table = studies.sweep(
+            problem,
+            params,
+            jnp.arange(first, first + seeds),
+            chunk=chunk,
+            mesh=mesh,
+            progress=not quiet,
+            **durable,
+        )
+    except ValueError as e:  # the sweep's own memory check (XLA's analysis of a chunk)
+        from .studies._sweep import MemoryLimitError
+
+        if durable.get("max_memory") is not None and isinstance(e, MemoryLimitError):
+            raise Refused(str(e)) from None
+        raise
     if durable.get("shard") is not None:
         return spec, table, None, None
     return (
@@ -548,6 +790,7 @@ def _sweeps(
 
     say = None if quiet else print
     results, mesh = {}, _mesh(devices)
+    dropped = _dropped(problem, data)
     for tag, p in problems(problem, data, noise, duration, rate, variants, robust=robust):
         if not p.scored:
             raise ValueError(f"{p.title}: a sweep needs the truth (the data file has none)")
@@ -604,6 +847,7 @@ def _sweeps(
             **p.checks(best["params"]),
         }
         _print_result(tag, p, held, f"{result['failed_runs']} of {len(table)} sweep runs failed")
+        _say_dropped(result, dropped, f"[{tag}] " if tag else "")
         if folder is not None:
             studies.save_table(table, folder)
             plot_sweep(
@@ -718,10 +962,14 @@ def tune_command(
     if job is not None:
         raise ValueError("--shard i/N is for sweep (tune follows one path: it needs every run)")
     results, mesh = {}, _mesh(devices)
+    dropped = _dropped(problem, data)
     for tag, p in problems(problem, data, noise, duration, rate, variants, robust=robust):
         if not p.scored:
             raise ValueError(f"{p.title}: tuning needs the truth (the data file has none)")
-        spec, table, summary, best = _one_sweep(p, grid, seeds, chunk, mesh, quiet, seed)
+        spec, table, summary, best = _one_sweep(
+            p, grid, seeds, chunk, mesh, quiet, seed, max_memory="available",
+            log=None if quiet else print,
+        )  # fmt: skip
         tuned = studies.tune(
             p,
             best["params"],
@@ -766,6 +1014,7 @@ def tune_command(
         for line in p.check_lines(result):
             extra += f"; {line}"
         _print_result(tag, p, held, extra)
+        _say_dropped(result, dropped, f"[{tag}] " if tag else "")
         folder = _folder(out, tag)
         if folder is not None:
             studies.save_table(table, folder)

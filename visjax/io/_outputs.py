@@ -31,6 +31,23 @@ COMMON = {
 }
 
 _ORDER = ("list[str]", "the order of the six components: vx, vy, vz, wx, wy, wz")
+_DATA_RESULT = (
+    "str",
+    "`successful`; the result code of a run that stopped; or `too_many_dropped_frames` "
+    "(a successful run on a file whose frames miss a feature in more than "
+    "`visjax.io.MAX_DROPPED_FRACTION` of them)",
+)
+_DROPPED = (
+    "float",
+    "the fraction of the file's frames with a feature missing (`dropped_fraction()`); "
+    "always written (absent only from summaries of earlier versions)",
+)
+_DROPPED_STUDY = (
+    "float",
+    "with `--data` in one of the papers' formats: the fraction of the file's frames with a "
+    "feature missing (`dropped_fraction()`)",
+)
+_FAILED_SAMPLE = ("int", "when the run stopped: the sample it stopped at (its time is printed)")
 
 SUMMARIES = {
     "geometry": {
@@ -63,7 +80,7 @@ SUMMARIES = {
     "velocity_data": {
         "z1_star": ("float", "the reference depth of feature 1, m"),
         "n_star": ("list[float]", "the plane normal measured from the frames"),
-        "result": ("str", "`successful`, or why the run stopped"),
+        "result": _DATA_RESULT,
         "order": _ORDER,
         "samples": ("int", "frames in the file"),
         "dropped_frames": ("int", "frames with too few features seen, held over"),
@@ -74,6 +91,8 @@ SUMMARIES = {
         "window_s?": ("list[float]", "with the truth: that window, s"),
         "filter_hz?": ("float", "with `--filter-hz`: the low-pass bandwidth, Hz"),
         "filter_delay_s?": ("float", "with `--filter-hz`: the filter's group delay, s"),
+        "dropped_fraction?": _DROPPED,
+        "failed_sample?": _FAILED_SAMPLE,
     },
     "structure": {
         "duration_s": ("float", "simulated time per set, s"),
@@ -87,7 +106,7 @@ SUMMARIES = {
         "seeds?": ("int", "with `--seeds` > 1: the noise seeds"),
     },
     "structure_data": {
-        "result": ("str", "`successful`, or why the run stopped"),
+        "result": _DATA_RESULT,
         "frames": ("int", "frames in the file"),
         "dropped_frames": ("int", "frames where the point was not seen"),
         "integration_step_s": ("float", "the observer's Euler step, s"),
@@ -104,6 +123,8 @@ SUMMARIES = {
         ),
         "rms_last_half?": ("list[float]", "with the truth: x, y, z RMS error, second half, m"),
         "window_s?": ("list[float]", "with the truth: that window, s"),
+        "dropped_fraction?": _DROPPED,
+        "failed_sample?": _FAILED_SAMPLE,
     },
     "euclidean": {
         "final_position_error_m": ("list[float]", "per unknown feature, at the end, m"),
@@ -118,7 +139,7 @@ SUMMARIES = {
         ),
     },
     "euclidean_data": {
-        "result": ("str", "`successful`, or why the run stopped"),
+        "result": _DATA_RESULT,
         "frames": ("int", "frames in the file"),
         "known_features": ("int", "features of known position"),
         "unknown_features": ("int", "features estimated"),
@@ -127,15 +148,22 @@ SUMMARIES = {
         "final_features_m": ("list[list[float]]", "the estimated features at the end, m"),
         "camera": ("dict", "the camera estimated at the end: `A`, `R_c`, `x_c`"),
         "final_position_error_m?": ("list[float]", "with the truth: per feature, m"),
+        "dropped_fraction?": _DROPPED,
+        "failed_sample?": _FAILED_SAMPLE,
     },
     "run": {
         "problem": ("str", "the problem's description (its source and noise)"),
         "method": ("str", "the method run (the estimator, or a baseline)"),
-        "result": ("str", "the result code's name (`successful`, or why it failed)"),
+        "result": (
+            "str",
+            "the result code's name (`successful`, or why it failed; "
+            "`too_many_dropped_frames` as for `velocity_data`)",
+        ),
         "failed_sample": ("int", "the sample at which the run failed, -1 if it did not"),
         "metrics": ("dict", "the problem's metrics against the truth (`null` if it failed)"),
         "gains": ("dict", "the gains run (the problem's defaults)"),
         "problem_settings": ("dict", "the problem's scenario and methods"),
+        "dropped_fraction?": _DROPPED_STUDY,
     },
     "compare": {
         "problem": ("str", "the registered problem's name (as given on the command line)"),
@@ -144,6 +172,7 @@ SUMMARIES = {
         "seeds": ("int", "noise seeds"),
         "problem_settings": ("dict", "the problem's scenario and methods"),
         "records": ("list[dict]", "one per method and seed (the rows of `records.parquet`)"),
+        "dropped_fraction?": _DROPPED_STUDY,
     },
     "sweep": {
         "metric": ("str", "the metric minimised"),
@@ -164,6 +193,7 @@ SUMMARIES = {
         "runs": ("int", "sweep runs"),
         "problem_settings": ("dict", "the problem's scenario"),
         "lmi?": ("dict", "moving_point on a thesis set: the LMI check of the best gains"),
+        "dropped_fraction?": _DROPPED_STUDY,
     },
     "tune": {
         "metric": ("str", "the metric minimised"),
@@ -184,6 +214,7 @@ SUMMARIES = {
         "held_out_failed_runs": ("dict", "failed held-out runs per point"),
         "problem_settings": ("dict", "the problem's scenario"),
         "lmi?": ("dict", "moving_point on a thesis set: the LMI check of the tuned gains"),
+        "dropped_fraction?": _DROPPED_STUDY,
     },
     "sweep_shard": {
         "runs": ("int", "the runs of this slice"),

@@ -1,6 +1,13 @@
 """Each paper's estimator on a user's data file, as `visjax velocity|structure|euclidean
 --data FILE` runs it: the estimate, what the summary reports and what failed, with no file
-written and nothing printed (`visjax.report` does that)."""
+written and nothing printed (`visjax.report` does that).
+
+A run that did not succeed reports its result code, the sample it stopped at and its time
+(`failure`, one line), and no error against the truth (a frozen state's numbers are not an
+estimate). A file whose frames miss a feature in more than `visjax.io.MAX_DROPPED_FRACTION`
+of them runs, but its result is `DROPPED_RESULT` instead of `successful`: the estimate rests
+mostly on held or extrapolated frames. Every summary reports the fraction
+(`dropped_fraction`)."""
 
 import dataclasses
 import functools
@@ -12,6 +19,16 @@ import numpy as np
 from ..io import Outputs
 from ._reproduction import Reproduction, stages
 
+DROPPED_RESULT = "too_many_dropped_frames"
+"""The result of a data file's run that succeeded on a file whose frames miss a feature in
+more than `visjax.io.MAX_DROPPED_FRACTION` of them: the name of `visjax.RESULTS`'s item."""
+
+_FORMATS = {
+    "velocity": "VelocityData",
+    "moving_point": "MovingPointData",
+    "static_points": "StaticPointsData",
+}  # the registered problems' data classes in `visjax.io`
+
 
 @dataclasses.dataclass(frozen=True)
 class FileEstimate:
@@ -20,7 +37,7 @@ class FileEstimate:
     **Fields:** `body` (the summary's keys, JSON-able); `arrays` (name -> array, what
     `estimate.npz` holds); `t`, `estimate` and `truth` (the times, the estimate and the
     truth at those times, `None` without one: what the figure draws); `failure` (`None`,
-    or what stopped the run, with its sample)."""
+    or one line: what stopped the run, with its sample and time, or the frames missing)."""
 
     body: dict
     arrays: dict
@@ -44,12 +61,81 @@ def last_half_rms(t, estimate, truth):
     return rms, [float(t[t >= start][0]), float(t[-1])]
 
 
-def _failure(sol, what: str) -> str | None:
-    from .._results import RESULTS
+def _float64(data):
+    """The data's floating arrays as float64 (a float32 file runs as a float64 one: the
+    commands compute in float64)."""
+    changed = {}
+    for f in dataclasses.fields(data):
+        v = getattr(data, f.name)
+        if v is not None and np.issubdtype(np.asarray(v).dtype, np.floating):
+            changed[f.name] = np.asarray(v, np.float64)
+    return dataclasses.replace(data, **changed)
 
-    if bool(sol.result == RESULTS.successful):
+
+def _load(cls, path):
+    return _float64(cls.load(path))
+
+
+def _failure(sol, t) -> tuple[str, int, str | None]:
+    """`(result, failed_sample, failure)`: the result code's name, the sample the run
+    stopped at (-1 if it did not) and, for a failed run, one line: `diverged at sample 123
+    (t = 0.123 s)` (`t` the file's sample times)."""
+    from .._results import result_names
+
+    code = result_names(sol.result)
+    if code == "successful":
+        return code, -1, None
+    k = int(np.asarray(sol.failed_sample))
+    t = np.asarray(t, float)
+    when = f" (t = {t[k]:.6g} s)" if 0 <= k < t.shape[0] else ""
+    return code, k, f"{code} at sample {k}{when}"
+
+
+def coverage_line(fraction: float, frames: int) -> str:
+    """`frames with a feature missing: 1500 of 2000 (75.0%)`, and past
+    `visjax.io.MAX_DROPPED_FRACTION` what that makes of the result."""
+    from ..io import MAX_DROPPED_FRACTION
+
+    missing = int(round(fraction * frames))
+    line = f"frames with a feature missing: {missing} of {frames} ({fraction:.1%})"
+    if fraction > MAX_DROPPED_FRACTION:
+        line += (
+            f", more than visjax.io.MAX_DROPPED_FRACTION ({MAX_DROPPED_FRACTION:.0%}): the "
+            "estimate rests mostly on held frames"
+        )
+    return line
+
+
+def file_coverage(problem: str, path) -> tuple[float, int] | None:
+    """`(dropped_fraction(), frames)` of the data file of a registered problem in one of
+    the papers' formats (`velocity`, `moving_point`, `static_points`, by their registered
+    names); `None` for another problem (its format is its own)."""
+    from .. import io
+
+    name = _FORMATS.get(problem)
+    if name is None:
         return None
-    return f"the {what} stopped: {sol.result} at sample {int(sol.failed_sample)}"
+    data = getattr(io, name).load(path)
+    return float(data.dropped_fraction()), int(np.shape(data.pixels)[0])
+
+
+def _outcome(command: str, sol, t, data, body: dict) -> str | None:
+    """The run's result, failed sample and `dropped_fraction` into `body`; returns the
+    command's one-line failure (`velocity: the run failed: diverged at sample 12 (t =
+    0.012 s)`), or `None` for a successful run on a well-covered file."""
+    from ..io import MAX_DROPPED_FRACTION
+
+    code, k, failed = _failure(sol, t)
+    fraction = body["dropped_fraction"] = float(data.dropped_fraction())
+    if failed is not None:
+        body["result"], body["failed_sample"] = code, k
+        return f"{command}: the run failed: {failed}"
+    if fraction > MAX_DROPPED_FRACTION:
+        body["result"] = DROPPED_RESULT
+        frames = int(np.shape(data.pixels)[0])
+        return f"{command}: the result is {DROPPED_RESULT}: {coverage_line(fraction, frames)}"
+    body["result"] = "successful"
+    return None
 
 
 def velocity_from_file(path, filter_hz=None) -> FileEstimate:
@@ -60,7 +146,6 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
     low-pass of the estimate (`lowpass`)."""
     import jax.numpy as jnp
 
-    from .._results import result_names
     from ..estimators import (
         SaveAt,
         VelocityEstimator,
@@ -74,7 +159,7 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
     from ..io import VelocityData
     from .chitrakaran import DOF_NAMES, K_EQ63, RHO_EQ63
 
-    data = VelocityData.load(path)
+    data = _load(VelocityData, path)
     camera = fixed_camera(
         data.pixels,
         data.A,
@@ -91,13 +176,12 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
     est = VelocityEstimator(K=K, rho=rho)
     dt = integration_step(stream, est)  # the file's own rate where the gains allow it
     sol = run(est, stream, dt=dt, saveat=SaveAt(), throw=False)
-    failure = _failure(sol, "estimator")
     ts = np.asarray(sol.ts)
     v_hat = np.asarray(sol.outputs.v_hat)
     body = {
         "z1_star": float(z1_star),
         "n_star": [float(x) for x in n_star],
-        "result": "successful" if failure is None else result_names(sol.result),
+        "result": "successful",
         "order": list(DOF_NAMES),
         "samples": int(len(data.t)),
         "dropped_frames": int(np.sum(~np.asarray(stream.present))),
@@ -105,13 +189,14 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
         "K": [float(x) for x in np.asarray(K)],
         "rho": [float(x) for x in np.asarray(rho)],
     }
+    failure = _outcome("velocity", sol, data.t, data, body)
     arrays = {"t": ts, "v_hat": v_hat, "v_object": np.asarray(sol.outputs.v_object)}
     if filter_hz is not None:
         arrays["v_filtered"] = np.asarray(lowpass(jnp.asarray(ts), jnp.asarray(v_hat), filter_hz))
         body["filter_hz"] = filter_hz
         body["filter_delay_s"] = lowpass_delay(filter_hz)
     shown, truth = arrays.get("v_filtered", v_hat), None
-    if data.velocity is not None:
+    if data.velocity is not None and "failed_sample" not in body:  # no error of a frozen state
         # the truth at the integration grid: the sample held at each grid time
         k = np.searchsorted(np.asarray(data.t), ts + 1e-9, side="right") - 1
         truth = np.asarray(data.velocity)[k]
@@ -125,33 +210,33 @@ def moving_point_from_file(path) -> FileEstimate:
     `moving_point_observer_for_data` (the LMI design for the file's camera motion), dropped
     frames extrapolated from the last two seen, 1 kHz on the held frames; the estimate at
     each frame time (the grid point at or just after it)."""
-    from .._results import result_names
     from ..estimators import SaveAt, integration_step, moving_point_stream, run
     from ..io import MovingPointData
     from ._moving_point import moving_point_observer_for_data
 
-    data = MovingPointData.load(path)
+    data = _load(MovingPointData, path)
     t = np.asarray(data.t, float)
     observer, u, info = moving_point_observer_for_data(data)
     stream = moving_point_stream(t, data.pixels, u, data.A, dropped="extrapolate", throw=False)
     dt = integration_step(stream, observer, max_step=1e-3)  # the thesis' 1 kHz law
     sol = run(observer, stream, dt=dt, saveat=SaveAt(), throw=False)
-    failure = _failure(sol, "observer")
     grid = np.asarray(sol.ts)
     j = np.clip(np.searchsorted(grid, t - 1e-9), 0, len(grid) - 1)
     position = np.asarray(sol.outputs.position)[j]
     x_hat = np.asarray(sol.outputs.x_hat)[j]
     seen = np.all(np.isfinite(np.asarray(data.pixels)), axis=1)
     body = {
-        "result": "successful" if failure is None else result_names(sol.result),
+        "result": "successful",
         "frames": int(len(t)),
         "dropped_frames": int(np.sum(~seen)),
         "integration_step_s": dt,
         **info,
     }
+    failure = _outcome("moving_point", sol, t, data, body)
     truth = None
     if data.position is not None:
         truth = np.asarray(data.position)
+    if truth is not None and "failed_sample" not in body:  # no error of a frozen state
         body["rms_last_half"], body["window_s"] = last_half_rms(t, position, truth)
     arrays = {"t": t, "position": position, "x_hat": x_hat}
     return FileEstimate(body, arrays, t, position, truth, failure)
@@ -163,7 +248,6 @@ def static_points_from_file(path) -> FileEstimate:
     (`StaticPointsEstimator.from_nominal`: initial guesses and gains from the scene's
     scale, never from a truth), 1 kHz on the held samples (at the samples if they are
     faster), features out of view (NaN) masked in both laws; saved every 10 ms."""
-    from .._results import result_names
     from ..estimators import (
         SaveAt,
         StaticPointsEstimator,
@@ -173,7 +257,7 @@ def static_points_from_file(path) -> FileEstimate:
     )
     from ..io import StaticPointsData
 
-    data = StaticPointsData.load(path)
+    data = _load(StaticPointsData, path)
     k = data.n_known
     pixels = np.asarray(data.pixels, float)
     stream = static_points_stream(
@@ -188,11 +272,10 @@ def static_points_from_file(path) -> FileEstimate:
     )
     every = max(1, int(round(0.01 / (longest if dt is None else dt))))
     sol = run(est, stream, dt=dt, saveat=SaveAt(every=every), throw=False)
-    failure = _failure(sol, "estimator")
     features = np.asarray(sol.outputs.omega_s)
     A, R_c, x_c = (np.asarray(getattr(sol.outputs, f)) for f in ("A", "R_c", "x_c"))
     body = {
-        "result": "successful" if failure is None else result_names(sol.result),
+        "result": "successful",
         "frames": int(pixels.shape[0]),
         "known_features": k,
         "unknown_features": int(pixels.shape[1] - k),
@@ -201,8 +284,9 @@ def static_points_from_file(path) -> FileEstimate:
         "final_features_m": features[-1].tolist(),
         "camera": {"A": A[-1].tolist(), "R_c": R_c[-1].tolist(), "x_c": x_c[-1].tolist()},
     }
+    failure = _outcome("static_points", sol, data.t, data, body)
     truth = None if data.features is None else np.asarray(data.features)
-    if truth is not None:
+    if truth is not None and "failed_sample" not in body:  # no error of a frozen state
         err = np.linalg.norm(features[-1] - truth, axis=-1)
         body["final_position_error_m"] = [float(e) for e in err]
     ts = np.asarray(sol.ts)
@@ -221,12 +305,25 @@ def _file_reproduction(run: FileEstimate, name: str, figure, lines, write) -> Re
     return Reproduction(run.body, lines, failure=run.failure)
 
 
+def _number(x, spec: str = ".4g") -> str:
+    """A number as text; `-` for one that is missing (`None`) or not finite."""
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return "-"
+    return format(x, spec) if np.isfinite(x) else "-"
+
+
 def _last_half_lines(body, what, names) -> list[str]:
-    if "rms_last_half" not in body:
+    if body.get("rms_last_half") is None:
         return []
-    a, b = body["window_s"]
-    cells = ", ".join(f"{n} {r:.4g}" for n, r in zip(names, body["rms_last_half"]))
-    return [f"{what} {a:g}-{b:g} s: {cells}"]
+    a, b = (_number(x, "g") for x in body["window_s"])
+    cells = ", ".join(f"{n} {_number(r)}" for n, r in zip(names, body["rms_last_half"]))
+    return [f"{what} {a}-{b} s: {cells}"]
+
+
+def _coverage_line(body) -> str:
+    return coverage_line(body["dropped_fraction"], body.get("frames", body.get("samples")))
 
 
 def velocity_file_reproduction(path, filter_hz=None, *, quiet=True, write=None) -> Reproduction:
@@ -243,7 +340,8 @@ def velocity_file_reproduction(path, filter_hz=None, *, quiet=True, write=None) 
     body = run.body
     lines = [
         f"Velocity estimator (Chitrakaran et al., eqs. 39-40) on {path}: {body['samples']} frames",
-        f"recovered z1* = {body['z1_star']:.6f} m; result: {body['result']}",
+        f"recovered z1* = {_number(body['z1_star'], '.6f')} m; result: {body['result']}",
+        _coverage_line(body),
         *_last_half_lines(body, "RMS error", DOF_NAMES),
     ]
     rep = _file_reproduction(
@@ -268,7 +366,9 @@ def moving_point_file_reproduction(path, *, quiet=True, write=None) -> Reproduct
     rate = body["design"]["convergence_rate_per_s"]
     lines = [
         f"Unknown input observer (Jang's thesis, eq. 3.5) on {path}: {body['frames']} frames, "
-        f"gains by design_uio_for_motion (rate {rate:.3g}/s); result: {body['result']}",
+        f"gains by design_uio_for_motion (rate {_number(rate, '.3g')}/s); result: "
+        f"{body['result']}",
+        _coverage_line(body),
         *_last_half_lines(body, "RMS position error (m)", "XYZ"),
     ]
     rep = _file_reproduction(
@@ -299,10 +399,12 @@ def static_points_file_reproduction(path, *, quiet=True, write=None) -> Reproduc
     lines = [
         f"Adaptive LS structure estimator (Nath et al., eqs. 37-51) on {path}: "
         f"{body['frames']} frames, {k} known and {body['unknown_features']} unknown "
-        f"features; result: {body['result']}"
+        f"features; result: {body['result']}",
+        _coverage_line(body),
     ]
-    for i, e in enumerate(body.get("final_position_error_m", [])):
-        lines.append(f"feature {k + i + 1}: final position error {e * 1000:8.3f} mm")
+    for i, e in enumerate(body.get("final_position_error_m") or []):
+        mm = None if e is None else 1000 * e
+        lines.append(f"feature {k + i + 1}: final position error {_number(mm, '8.3f')} mm")
     rep = _file_reproduction(run, "euclidean", figure, lines, write)
     bar.update()
     bar.close()

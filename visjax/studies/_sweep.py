@@ -442,11 +442,16 @@ def _check_memory(compiled, leaves, key_data, chunk, max_memory, log):
         log(f"memory per chunk of {chunk} runs: {need / 2**20:.1f} MiB")
     if limit is not None and need > limit:
         fits = max(1, int(chunk * limit / need))
-        raise ValueError(
+        raise MemoryLimitError(
             f"a chunk of {chunk} runs needs {need / 2**20:.0f} MiB, more than the "
             f"{limit / 2**20:.0f} MiB available to it: use a chunk of at most {fits} runs "
             "(`--chunk`)."
         )
+
+
+class MemoryLimitError(ValueError):
+    """A chunk of a sweep that would need more memory than it may use (the message says
+    how large a chunk fits)."""
 
 
 class _Timer:

@@ -1,0 +1,227 @@
+"""Plausible mistakes on the command line end in one line, never a traceback nor silent
+garbage: a failed run on a data file names its result code (exit 1, its files kept), a grid
+with an unknown or invalid parameter and a study too large for the machine are refused
+before any work (exit 2), and a data file with most frames missing a feature says so."""
+
+import json
+import re
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tests.example_data import velocity_example
+from visjax import io, studies, verbs
+from visjax._results import RESULTS
+from visjax.cli import main
+
+ONE_FAILED_RUN = re.compile(
+    r"visjax: error: velocity: the run failed: (\w+) at sample (\d+) \(t = ([0-9.e-]+) s\)\n"
+)
+TOY = ["--import", "tests.studies.slow_toy"]  # `slow-toy`: built at once, one parameter `gain`
+
+
+def _velocity_file(path, *, jump_at=None, drop_from=None, dtype=np.float64):
+    """The example velocity scene, 0.1 s at 1 kHz, 6 features, noise- and dropout-free
+    (every file here has the same shapes: one compiled run serves them all). `jump_at`:
+    from that frame on the pixels jump 20,000 px sideways (a tracker that switched to
+    other coordinates); `drop_from`: feature 6 missing from that frame on."""
+    data = velocity_example(duration=0.1, noise_px=0.0, dropout=0.0)
+    pixels = np.array(data.pixels)
+    if jump_at is not None:
+        pixels[jump_at:, :, 0] += 2e4
+    if drop_from is not None:
+        pixels[drop_from:, 5] = np.nan
+    arrays = {k: v for k, v in vars(data).items() if v is not None}
+    arrays["pixels"] = pixels
+    np.savez(path, **{k: np.asarray(v, dtype) for k, v in arrays.items()})
+    return path
+
+
+@pytest.fixture
+def no_study(monkeypatch):
+    """Every study function raises if called: a refusal comes before any work."""
+
+    def never(*args, **kwargs):
+        raise AssertionError("the study started")
+
+    for name in ("sweep", "tune", "compare"):
+        monkeypatch.setattr(studies, name, never)
+
+
+def _refused(argv, capsys) -> str:
+    """The command refused before any work: exit status 2, one line; returns it."""
+    started = time.perf_counter()
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    err = capsys.readouterr().err
+    assert e.value.code == 2, err
+    assert err.startswith("visjax: error:") and err.count("\n") == 1, err
+    assert time.perf_counter() - started < 30  # no compile, no run
+    return err
+
+
+# 1. a failed run on a data file: its result code, one line, exit 1, its files kept
+
+
+def test_a_failed_data_run_with_truth_names_its_result_code(tmp_path, capsys):
+    path = _velocity_file(tmp_path / "jump.npz", jump_at=50)
+    out = tmp_path / "out"
+    assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 1
+    printed = capsys.readouterr()
+    match = ONE_FAILED_RUN.fullmatch(printed.err)
+    assert match, printed.err  # one line: the code, the sample, its time; no traceback
+    code, sample, t = match[1], int(match[2]), float(match[3])
+    assert code != "successful" and sample == 50 and t == pytest.approx(0.05)
+    # no error of the frozen state against the truth, nothing printed as None or null
+    assert "RMS" not in printed.out and "None" not in printed.out and "null" not in printed.out
+    assert f"result: {code}" in printed.out
+    summary = json.loads((out / "summary.json").read_text())
+    io.validate_summary(summary)
+    assert summary["result"] == code and summary["failed_sample"] == 50
+    assert "rms_last_half" not in summary and summary["dropped_fraction"] == 0.0
+    assert (out / "estimate.npz").exists() and (out / "velocity.png").exists()
+
+
+class _Stopped(eqx.Module):
+    ts: jax.Array
+    outputs: dict
+    result: RESULTS
+    failed_sample: jax.Array
+
+
+class _Diverging(studies.AbstractProblem):
+    """A problem whose one method always diverges at sample 2."""
+
+    methods = ("estimator",)
+    metric = "error"
+
+    samples: jax.Array
+
+    def parameters(self):
+        return {"gain": studies.Parameter(1.0, "-", True, "a gain")}
+
+    def inputs(self, key):
+        return self.samples + 0.1 * jax.random.normal(key, self.samples.shape)
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        value = params["gain"] * inputs
+        return _Stopped(jnp.arange(4.0), {"value": value}, RESULTS.diverged, jnp.array(2))
+
+    def metrics(self, method, solution):
+        return {"error": jnp.max(jnp.abs(solution.outputs["value"]))}
+
+
+@pytest.fixture
+def diverging():
+    from visjax.studies import _registry
+
+    name = "diverging-toy"
+    studies.register_problem(name, lambda *, noise_px=0.0: _Diverging(jnp.zeros(4)), replace=True)
+    yield name
+    _registry._REGISTRY.pop(name, None)
+
+
+def test_a_failed_run_of_the_run_verb_is_the_same_rule(diverging, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["run", diverging, "--quiet", "--out", str(out)]) == 1
+    printed = capsys.readouterr()
+    assert printed.err == f"visjax: error: run {diverging}: the run failed: diverged at sample 2\n"
+    assert "None" not in printed.out and "error = -" in printed.out
+    summary = io.read_summary(out / "summary.json")
+    assert summary["result"] == "diverged" and summary["failed_sample"] == 2
+    assert summary["metrics"] == {"error": None}
+
+
+# 2. a grid names the problem's parameters, with valid values, checked before any work
+
+
+def test_an_unknown_grid_axis_is_refused_naming_the_valid_ones(no_study, capsys):
+    for command in ("sweep", "tune"):
+        err = _refused([*TOY, command, "slow-toy", "--grid", "gian=1/2"], capsys)
+        assert "'gian'" in err and "did you mean 'gain'?" in err and "gain" in err
+    err = _refused([*TOY, "sweep", "slow-toy", "--grid", "gain=1/2,nosuch=3"], capsys)
+    assert "'nosuch'" in err and "did you mean" not in err
+
+
+@pytest.mark.parametrize(
+    "grid, says",
+    [
+        ("gain=-1/2", "must be positive"),
+        ("gain=0/2", "must be positive"),
+        ("gain=nan/2", "not finite"),
+        ("gain=1/inf", "not finite"),
+        ("gain=-1:10:3", "positive ends"),
+    ],
+)
+def test_invalid_grid_values_are_refused(grid, says, no_study, capsys):
+    err = _refused([*TOY, "sweep", "slow-toy", "--grid", grid], capsys)
+    assert says in err and "gain" in err
+
+
+# 3. studies sized before they start: the run count, then the memory
+
+
+def test_absurd_run_counts_are_refused(no_study, capsys):
+    err = _refused([*TOY, "compare", "slow-toy", "--seeds", "2000000000"], capsys)
+    assert "2e+09 runs" in err and "--seeds" in err
+    grid = ["--grid", "gain=1:10:100000"]
+    err = _refused([*TOY, "sweep", "slow-toy", *grid, "--seeds", "100000"], capsys)
+    assert "1e+10 runs" in err
+    err = _refused(
+        [*TOY, "tune", "slow-toy", *grid[:1], "gain=1/2", "--steps", "1000000000"], capsys
+    )
+    assert "--steps" in err
+    err = _refused([*TOY, "sweep", "slow-toy", "--grid", "gain=1:10:2000000000"], capsys)
+    assert "2e+09 points" in err  # counted from the text: no grid of that size is built
+
+
+def test_a_study_larger_than_the_memory_is_refused(no_study, monkeypatch, capsys):
+    monkeypatch.setattr(verbs, "available_memory", lambda: 100.0)  # bytes
+    for argv in (
+        ["sweep", "slow-toy", "--grid", "gain=1/2", "--seeds", "2"],
+        ["tune", "slow-toy", "--grid", "gain=1/2", "--seeds", "2"],
+        ["compare", "slow-toy", "--seeds", "2"],
+    ):
+        err = _refused([*TOY, *argv], capsys)
+        assert "MiB available" in err, err
+
+
+def test_tune_measures_its_chunk_before_it_runs(monkeypatch, capsys):
+    """Past the bound before any compile, `tune` has the sweep measure its chunk (XLA's
+    analysis, as `sweep` does): too large, it is refused before any run, exit 2."""
+    from visjax.studies import _sweep
+
+    def never(*args, **kwargs):
+        raise AssertionError("the tuning started")
+
+    monkeypatch.setattr(studies, "tune", never)
+    monkeypatch.setattr(_sweep, "_available_memory", lambda: 1000.0)
+    argv = [*TOY, "tune", "slow-toy", "--grid", "gain=1/2", "--seeds", "2", "--quiet"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "use a chunk of at most" in err, err
+
+
+# 4. the coverage of a data file: reported, and past the limit not "successful"
+
+
+def test_a_file_with_most_frames_missing_a_feature_is_not_successful(tmp_path, capsys):
+    # float32, as a tracker may write it: it runs as float64
+    path = _velocity_file(tmp_path / "drop.npz", drop_from=25, dtype=np.float32)
+    assert io.VelocityData.load(path).dropped_fraction() == 0.75 > io.MAX_DROPPED_FRACTION
+    out = tmp_path / "out"
+    assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 1
+    printed = capsys.readouterr()
+    assert printed.err.count("\n") == 1 and "too_many_dropped_frames" in printed.err
+    assert "75 of 100 (75.0%)" in printed.out
+    summary = io.read_summary(out / "summary.json")
+    assert summary["dropped_fraction"] == 0.75
+    assert summary["result"] == "too_many_dropped_frames" != "successful"
+    # the study verbs read the same fraction from the file
+    dropped = verbs._dropped("velocity", path)
+    assert dropped["fraction"] == 0.75 and dropped["over"]
+    assert verbs._dropped("slow-toy", path) is None  # a format of its own: not reported
