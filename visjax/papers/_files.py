@@ -175,7 +175,10 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
     rho = RHO_EQ63 if data.rho is None else data.rho
     est = VelocityEstimator(K=K, rho=rho)
     dt = integration_step(stream, est)  # the file's own rate where the gains allow it
-    sol = run(est, stream, dt=dt, saveat=SaveAt(), throw=False)
+    # saved about once per sample interval (a gain whose bound needs a short step would
+    # otherwise save every one of its steps: hundreds of MB for seconds of data)
+    every = 1 if dt is None else max(1, round(float(np.median(np.diff(data.t))) / dt))
+    sol = run(est, stream, dt=dt, saveat=SaveAt(every=every), throw=False)
     ts = np.asarray(sol.ts)
     v_hat = np.asarray(sol.outputs.v_hat)
     body = {
