@@ -25,7 +25,10 @@ def _python(code: str, xla_flags: str | None = None, timeout: int = 300) -> str:
     return done.stdout
 
 
-@pytest.mark.parametrize("preset", [None, "--xla_force_host_platform_device_count=2"])
+@pytest.mark.parametrize(
+    "preset",
+    [None, pytest.param("--xla_force_host_platform_device_count=2", marks=pytest.mark.slow)],
+)
 def test_import_leaves_xla_flags_and_jax_config_unchanged(preset):
     code = (
         "import os, json, jax\n"
@@ -43,7 +46,9 @@ def test_import_leaves_xla_flags_and_jax_config_unchanged(preset):
     assert env_same and config_same
 
 
-@pytest.mark.parametrize("preset", ["", "--xla_cpu_use_fusion_emitters=true"])
+@pytest.mark.parametrize(
+    "preset", ["", pytest.param("--xla_cpu_use_fusion_emitters=true", marks=pytest.mark.slow)]
+)
 def test_apply_appends_the_missing_options_and_the_backend_starts(preset):
     code = (
         "import visjax, jax, jax.numpy as jnp, os\n"

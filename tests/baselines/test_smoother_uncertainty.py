@@ -97,6 +97,7 @@ def test_predicted_spread_matches_the_monte_carlo(scene):
     assert np.all(np.asarray(causal.diagnostics.cov[:, 0]) == 0.0)
 
 
+@pytest.mark.slow  # the unit tier's time (velocity fits compiled anew)
 def test_cauchy_loss_takes_an_outlier_track(scene):
     """One feature 20 px off in every third frame: least squares' velocity error grows
     several times over; with `loss=cauchy(1.0)` it stays near that on clean pixels."""
@@ -120,6 +121,7 @@ def test_cauchy_loss_takes_an_outlier_track(scene):
         velocity_smoother(TS, noisy, camera, poses=poses, loss=cauchy(1.0), **FIT)
 
 
+@pytest.mark.slow  # the unit tier's time (velocity fits compiled anew)
 def test_gradient_under_jit_and_vmap(scene):
     """The derivative of a frame's velocity with respect to the pixels, through the robust
     pose fits (`loss=cauchy`), under jit and vmap over two draws: finite, and along a random
@@ -146,6 +148,7 @@ def test_gradient_under_jit_and_vmap(scene):
     np.testing.assert_allclose(float(jnp.sum(grads[0] * d)), difference, rtol=1e-3)
 
 
+@pytest.mark.slow  # the unit tier's time (velocity fits compiled anew)
 def test_velocity_problem_uncertainty_and_robust_settings():
     """`robust=True`: the Cauchy loss in the fits, the gate in the EKF, stated; its batch
     method solves. `uncertainty`: the batch fit's predicted RMS per component over the

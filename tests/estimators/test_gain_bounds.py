@@ -54,15 +54,26 @@ def _codes(sol):
     return result_names(sol.result), [int(k) for k in np.asarray(sol.failed_sample)]
 
 
-def test_rho_is_refused_concretely_and_flagged_in_vmap(short):
-    """rho = 1e9 at 1 kHz: a `ValueError` naming `rho`, its bound and the step; inside a
-    vmapped run `chattering_step` at sample 0 for that element only. Beside it the
-    paper's gains (clean and with 1 px of noise) succeed, and an estimate 1e3 rad from the
-    signal (a state far below the 1e8 bound) is `diverged` at sample 0."""
-    sc, stream, noisy = short
+def test_rho_is_refused_concretely_and_growth_is_checked(short):
+    """rho = 1e9 at 1 kHz: a `ValueError` naming `rho`, its bound and the step, before
+    anything runs; `valid` flags an estimate that left its signal while the state is far
+    below the fixed 1e8 bound."""
+    _, stream, _ = short
     with pytest.raises(ValueError, match=r"step 0\.001 s exceeds the chattering bound of `rho`"):
         run(VelocityEstimator(K=K, rho=BIG_RHO), stream)
+    y0 = stream.measurement(0)
+    est = VelocityEstimator(K=K, rho=BIG_RHO)
+    state = VelocityState(e_hat=y0.e.at[4].add(1e3), eta=jnp.full(6, 1e6))
+    assert bool(est.valid(state)) and not bool(est.valid(state, y0))
 
+
+@pytest.mark.slow  # a vmapped velocity run of four elements: the unit tier's time
+def test_rho_is_flagged_in_vmap(short):
+    """Inside a vmapped run rho = 1e9 at 1 kHz gives `chattering_step` at sample 0 for that
+    element only. Beside it the paper's gains (clean and with 1 px of noise) succeed, and an
+    estimate 1e3 rad from the signal (a state far below the 1e8 bound) is `diverged` at
+    sample 0."""
+    sc, stream, noisy = short
     offset = jnp.zeros(6).at[3].set(1e3)  # 1e3 rad on e_omega: |e_hat| < 1e8 still
 
     def one(rho, pixels, off):
@@ -83,16 +94,12 @@ def test_rho_is_refused_concretely_and_flagged_in_vmap(short):
     assert float(jnp.max(jnp.abs(sol.final_state.e_hat[3]))) < 1e8
 
 
+@pytest.mark.slow  # a vmapped Heun run: the unit tier's time
 def test_divergence_by_growth_where_the_state_bound_misses(short):
     """Heun (no step bound is applied to it): rho = 1e9 chatters by ~1e3 rad per step and
     K x 10 grows geometrically. Both stop with `diverged` within the first steps, with the
     state far below the old 1e8 bound; the paper's gains beside them succeed."""
     _, stream, _ = short
-    y0 = stream.measurement(0)
-    est = VelocityEstimator(K=K, rho=BIG_RHO)
-    # what the growth check adds: a state below 1e8 whose estimate left the signal
-    state = VelocityState(e_hat=y0.e.at[4].add(1e3), eta=jnp.full(6, 1e6))
-    assert bool(est.valid(state)) and not bool(est.valid(state, y0))
 
     def one(k, rho):
         est = VelocityEstimator(K=k, rho=rho)

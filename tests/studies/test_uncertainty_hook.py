@@ -11,6 +11,7 @@ from visjax._results import RESULTS
 from visjax.papers import hamel
 
 
+@pytest.mark.slow  # four methods compiled; point-depth's compare test is in the unit tier
 def test_compare_reports_the_static_points_predicted_spread():
     problem = papers.static_points_problem(noise_px=0.5, duration=2.0, rate_hz=20.0)
     records = studies.compare(problem, seeds=2, repeats=1)
