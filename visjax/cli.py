@@ -7,6 +7,7 @@ import contextlib
 import importlib
 import inspect
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -377,7 +378,12 @@ def main(argv=None) -> int:
     except _Interrupted as e:
         where = "" if args.out is None else "; nothing was written to --out"
         sys.stderr.write(f"visjax: interrupted by {e.name}{where}\n")
-        return 128 + e.signum
+        # the staging folder is gone (every `finally` ran); end at once, as a signal's
+        # default would: the interpreter's shutdown with JAX's threads mid-computation
+        # can crash (a segmentation fault after the line above)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(128 + e.signum)
     if failed is not None:  # its files are in place: the run's result code, one line
         sys.stderr.write(f"visjax: error: {_one_line(failed)}\n")
         return 1
