@@ -246,25 +246,33 @@ def track_report(
     **Returns:** the summary: frames, features, features in frame 0, fraction tracked, and
     `lost_tracks`: how many tracks each check ended (`visjax.frontend.LOST_REASONS`; with
     `planar`, `homography` counts the outlier tracks cut).
-    Raises `ValueError` (nothing written) when the detector finds no feature at all.
+    Raises `visjax.io.DataFormatError` (nothing written; exit status 2 on the command
+    line) for a video that cannot be tracked: not a readable or a damaged video
+    (`read_video`), fewer than 2 frames (a still image), no frame rate, no feature found.
     """
     from .frontend import read_video, track_frames
-    from .io import save_tracks_csv
+    from .io import DataFormatError, save_tracks_csv
 
     out = Path(out)
     if out.suffix.lower() not in (".npz", ".csv"):
         raise ValueError(f"{out}: the tracks file must end in .npz or .csv.")
     frames, video_fps = read_video(video)
+    if frames.shape[0] < 2:
+        raise DataFormatError(
+            f"{video}: {frames.shape[0]} frame (a still image?); tracking needs at least 2."
+        )
     rate = video_fps if fps is None else fps
     if not (rate is not None and math.isfinite(rate) and rate > 0):
-        raise ValueError(f"{video}: the video does not state its frame rate; give --fps.")
+        raise DataFormatError(f"{video}: the video does not state its frame rate; give --fps.")
     tracks = track_frames(
         frames, fps=rate, detector=detector, max_features=max_features,
         fb_threshold=fb_threshold, planar=planar, homography_threshold=homography_threshold,
         progress=not quiet,
     )  # fmt: skip
     if tracks.pixels.shape[1] == 0:
-        raise ValueError(f"{video}: the {detector!r} detector found no feature to track.")
+        raise DataFormatError(
+            f"{video}: the {detector!r} detector found no feature to track (blank frames?)."
+        )
     if out.suffix.lower() == ".csv":
         save_tracks_csv(out, tracks.t, tracks.pixels)
     else:

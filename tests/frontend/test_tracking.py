@@ -372,13 +372,45 @@ def test_cli_track_bad_files(tmp_path, capsys):
     assert e.value.code == 2 and ".npz or .csv" in capsys.readouterr().err
     garbage = tmp_path / "garbage.mp4"
     garbage.write_text("not a video")
-    assert main(["track", str(garbage), "--out", str(out)]) == 1
+    assert main(["track", str(garbage), "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("visjax: error:") and err.count("\n") == 1
     # no marker in the video: an error, not an empty tracks file
-    assert main(["track", str(video), "--out", str(out), "--detector", "aruco"]) == 1
+    assert main(["track", str(video), "--out", str(out), "--detector", "aruco"]) == 2
     assert "found no feature" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["garbage.mp4", "v.npz"]
+
+
+def test_cli_track_refuses_damaged_videos_and_stills(tmp_path, capsys):
+    """A corrupt MP4 (fewer frames decode than its container declares), a still image
+    renamed `.mp4`, a one-frame NPZ: one line, exit status 2, nothing written."""
+    import cv2
+
+    from visjax.cli import main
+
+    frames = _frames()[:24]
+    raw = bytearray(write_video(tmp_path / "good.mp4", frames, 30.0).read_bytes())
+    middle = len(raw) // 2
+    raw[middle : middle + 1024] = bytes(i % 251 for i in range(1024))
+    (tmp_path / "corrupt.mp4").write_bytes(bytes(raw))
+    png = tmp_path / "still.png"
+    cv2.imwrite(str(png), frames[0])
+    png.rename(tmp_path / "still.mp4")
+    write_video(tmp_path / "one.npz", frames[:1], 30.0)
+    out = tmp_path / "out" / "tracks.npz"
+    for name, words in (
+        ("corrupt.mp4", "a damaged video"),
+        ("still.mp4", "tracking needs at least 2"),
+        ("one.npz", "tracking needs at least 2"),
+    ):
+        assert main(["track", str(tmp_path / name), "--out", str(out), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        last = err.strip().splitlines()[-1]  # FFmpeg's own complaints may come first
+        assert last.startswith("visjax: error:") and words in last, err
+        assert err.count("visjax:") == 1
+    assert not out.parent.exists()
+    back, _ = read_video(tmp_path / "good.mp4")  # the intact file still reads whole
+    assert back.shape[0] == 24
 
 
 def test_bad_inputs_raise_the_documented_errors(tmp_path):

@@ -129,13 +129,54 @@ def test_intrinsics_must_be_a_pinhole_camera(tmp_path, bad, words):
     "scale,unit", [(1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")]
 )
 def test_times_in_other_units_than_seconds_are_refused(tmp_path, scale, unit):
-    data = _velocity()
+    data = _velocity()  # 30 Hz
     path = _saved(tmp_path, data, t=data.t * scale)
-    _refused(path, VelocityData, f"`t` looks like {unit}", "give seconds")
+    _refused(path, VelocityData, "`t` does not look like seconds", f"in {unit} 30 Hz")
     path = _saved(tmp_path, _structure(), camera_t=np.arange(40) * 20.0)
-    _refused(path, MovingPointData, "`camera_t` looks like milliseconds", "median interval 20")
+    _refused(path, MovingPointData, "`camera_t` does not look", "in milliseconds 50 Hz")
     path = _saved(tmp_path, data, t=data.t / 3600)  # hours
     _refused(path, VelocityData, "`t`'s median interval", "likely not seconds")
+
+
+def test_a_fast_log_in_milliseconds_needs_its_unit_declared(tmp_path):
+    """A 1 kHz log in ms has intervals of 1, a plausible (slow) camera in seconds: refused
+    until the file says which (`time_unit`); declared, it loads in seconds."""
+    data = _velocity(N=40)
+    ms = np.arange(40) * 1.0  # 1 kHz in milliseconds
+    path = _saved(tmp_path, data, t=ms)
+    message = _refused(path, VelocityData, "`t` does not look like seconds", "1 Hz in seconds")
+    assert "in milliseconds 1 kHz" in message and 'time_unit="s"' in message
+    loaded = VelocityData.load(_saved(tmp_path, data, t=ms, time_unit=np.asarray("ms")))
+    np.testing.assert_allclose(loaded.t, ms * 1e-3, rtol=1e-15)
+    assert loaded.time_unit == "s"
+    # a genuinely slow camera (1 Hz in seconds) loads once declared
+    slow = VelocityData.load(_saved(tmp_path, data, t=ms, time_unit=np.asarray("s")))
+    np.testing.assert_array_equal(slow.t, ms)
+    # a ROS log: int64 nanoseconds since the epoch, 30 Hz
+    stamps = 1_717_000_000_000_000_000 + np.arange(40, dtype=np.int64) * 33_333_333
+    ros = VelocityData.load(_saved(tmp_path, data, t=stamps, time_unit=np.asarray("ns")))
+    np.testing.assert_allclose(ros.t, np.arange(40) * 0.033333333, rtol=1e-12)
+    # a structure file converts both of its clocks
+    st = _structure()
+    path = _saved(
+        tmp_path, st, t=st.t * 1e3, camera_t=st.camera_t * 1e3, time_unit=np.asarray("ms")
+    )
+    loaded = MovingPointData.load(path)
+    np.testing.assert_allclose(loaded.camera_t, st.camera_t, rtol=1e-12)
+    np.testing.assert_allclose(loaded.t, st.t, rtol=1e-12)
+    # beyond MAX_INTERVAL_S even a declaration does not help; an unknown unit is named
+    _refused(_saved(tmp_path, data, t=ms * 20, time_unit=np.asarray("s")), VelocityData, "0.05 Hz")
+    _refused(_saved(tmp_path, data, time_unit=np.asarray("min")), VelocityData, "`time_unit`")
+    data.time_unit = "ms"  # in memory, times are seconds
+    with pytest.raises(DataFormatError, match="in memory, times are seconds"):
+        data.validate()
+    # CSV tracks declare it as an argument
+    csv = tmp_path / "tracks.csv"
+    csv.write_text("t,feature,u,v\n0,0,1,2\n1,0,3,4\n2,0,5,6\n")
+    with pytest.raises(DataFormatError, match="in milliseconds 1 kHz"):
+        load_tracks_csv(csv)
+    t, _ = load_tracks_csv(csv, time_unit="ms")
+    np.testing.assert_allclose(t, [0.0, 1e-3, 2e-3])
 
 
 def test_dates_and_durations_are_refused(tmp_path):
@@ -249,7 +290,7 @@ def test_corrupt_files_are_one_line(tmp_path):
         (b"\x00\x9f\xff\xfe binary", "not UTF-8"),
         (b"t,feature,u,v\n0,0,1,2\n0.1,0,1\n", "line 3 has 3 values"),
         (b"t,feature,u,v\n0,0,1,2\n0,0,3,4\n", "line 3 repeats feature 0"),
-        (b"t,feature,u,v\n0,0,1,2\n33,0,3,4\n", "`t` looks like milliseconds"),
+        (b"t,feature,u,v\n0,0,1,2\n33,0,3,4\n", "in milliseconds 30.3 Hz"),
         (b"t,feature,u,v\nnan,0,1,2\n", "finite"),
     ],
 )
@@ -319,13 +360,29 @@ def test_the_command_line_says_one_line(tmp_path, capsys):
     from visjax.cli import main
 
     paths = _corrupt_files(tmp_path)
+    commands = [[c] for c in ("velocity", "moving_point", "static_points")]
+    commands += [[v, p] for v in ("run", "compare", "sweep", "tune") for p in ("velocity",)]
+    commands += [["run", "moving_point"], ["run", "static_points"]]
     for name in ("empty", "renamed npy", "damaged"):
-        for argv in (["velocity"], ["run", "velocity"]):
+        for argv in commands:
             code = main([*argv, "--data", str(paths[name]), "--quiet"])
             err = capsys.readouterr().err
             assert code == 2, (argv, name, code)
             assert err.startswith("visjax: error:") and err.count("\n") == 1, err
-            assert "not a readable .npz file" in err, err
+            # the damaged file is a velocity file: other formats name its keys first
+            assert "not a readable .npz file" in err or (
+                name == "damaged" and "unknown key" in err
+            ), err
+        # `track` reads a video from an .npz too
+        out = tmp_path / "tracks.npz"
+        try:
+            code = main(["track", str(paths[name]), "--out", str(out), "--quiet"])
+        except SystemExit as e:  # refused by the parser (e.g. an empty file)
+            code = e.code
+        err = capsys.readouterr().err
+        assert code == 2, (name, code, err)
+        assert err.startswith("visjax: error:") and err.count("\n") == 1, err
+        assert not out.exists()
 
     proc = subprocess.run(  # a real process: nothing escapes as a traceback
         [sys.executable, "-m", "visjax.cli", "run", "velocity", "--quiet"]

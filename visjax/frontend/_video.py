@@ -70,28 +70,37 @@ def read_video(path) -> tuple[np.ndarray, float]:
     uint8 and `fps`.
 
     **Returns:** `(frames (N, H, W) uint8, fps)`; `fps` is NaN when the container does not
-    state it. Raises `FileNotFoundError` for a missing file and `ValueError` for a file
-    that is not a readable video (or an NPZ without the keys, or with no frames).
+    state it. Raises `FileNotFoundError` for a missing file and `visjax.io.DataFormatError`
+    (a `ValueError`; one line naming the file) for a file that is not a readable video: one
+    OpenCV cannot open or decode, a damaged one (fewer frames decode than its container
+    declares: it is truncated or corrupt from that frame on), an NPZ without the keys, with
+    no frames or frames that are not uint8, or with an `fps` that is not positive.
     """
+    from ..io import DataFormatError
+
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such video file.")
     if path.suffix.lower() == ".npz":
-        from ..io import DataFormatError, read_npz
+        from ..io import read_npz
 
         data = read_npz(path)  # a DataFormatError (a ValueError): one line, no traceback
         if "frames" not in data or "fps" not in data:
             raise DataFormatError(f"{path}: expected the keys 'frames' and 'fps'.")
-        frames, fps = data["frames"], float(data["fps"])
-        return check_frames(frames, f"{path.name}['frames']"), _check_fps(fps)
+        try:
+            fps = _check_fps(data["fps"])
+            return check_frames(data["frames"], f"{path.name}['frames']"), fps
+        except ValueError as e:
+            raise DataFormatError(f"{path}: {e}") from None
     import cv2
 
     capture = cv2.VideoCapture(str(path))
     frames = []
     try:
         if not capture.isOpened():
-            raise ValueError(f"{path}: OpenCV cannot open it as a video.")
+            raise DataFormatError(f"{path}: OpenCV cannot open it as a video.")
         fps = float(capture.get(cv2.CAP_PROP_FPS))
+        declared = int(max(capture.get(cv2.CAP_PROP_FRAME_COUNT), 0))
         while True:
             ok, frame = capture.read()
             if not ok:
@@ -102,7 +111,12 @@ def read_video(path) -> tuple[np.ndarray, float]:
     finally:
         capture.release()
     if not frames:
-        raise ValueError(f"{path}: no frame could be decoded.")
+        raise DataFormatError(f"{path}: no frame could be decoded.")
+    if len(frames) < declared - 1:  # a container's count may be one off, never more
+        raise DataFormatError(
+            f"{path}: a damaged video: its container declares {declared} frames but only "
+            f"{len(frames)} decode (truncated or corrupt from frame {len(frames)} on)."
+        )
     return np.stack(frames).astype(np.uint8), fps if np.isfinite(fps) and fps > 0 else np.nan
 
 

@@ -11,6 +11,8 @@ from ._formats import (
     MAX_INTERVAL_S as MAX_INTERVAL_S,
     MIN_INTERVAL_S as MIN_INTERVAL_S,
     MIN_OBSERVATIONS as MIN_OBSERVATIONS,
+    SLOW_INTERVAL_S as SLOW_INTERVAL_S,
+    TIME_UNITS as TIME_UNITS,
     DataFormatError as DataFormatError,
     MovingPointData as MovingPointData,
     StaticPointsData as StaticPointsData,

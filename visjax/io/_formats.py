@@ -66,8 +66,14 @@ prints as one line:
   $(0, 0, 1)$ (to 1e-9 relative), positive focal lengths `A[0, 0]`, `A[1, 1]`; the transpose
   (MATLAB's convention, $K^T$) is named as such;
 - times in other units than seconds: a median sample interval of `t` (or `camera_t`)
-  outside [`MIN_INTERVAL_S`, `MAX_INTERVAL_S`] = [1e-5 s, 10 s], with the likely unit
-  (milliseconds, microseconds, nanoseconds) when it is too long;
+  outside [`MIN_INTERVAL_S`, `MAX_INTERVAL_S`] = [1e-5 s, 10 s], with the rate each
+  likely unit (milliseconds, microseconds, nanoseconds) would give; and, unless the file
+  declares its unit, a median interval above `SLOW_INTERVAL_S` = 0.2 s (slower than 5 Hz):
+  that is what a log at 200 Hz to 10 kHz in milliseconds looks like (a 1 kHz log in ms has
+  intervals of 1), and a camera that slow is rare enough to ask for the declaration. A file
+  declares its unit with the key `time_unit` (a string: `"s"`, `"ms"`, `"us"`, `"ns"`);
+  `load` converts its times to seconds (a ROS log's nanoseconds load as they are; integer
+  times are counted from the earliest of them, exactly);
 - a feature (a column of `pixels`) seen in fewer than `MIN_OBSERVATIONS` = 2 images (the
   velocity format counts its reference image): one view shows no motion and no depth.
 
@@ -102,6 +108,17 @@ camera or a motion log in seconds."""
 MAX_INTERVAL_S = 10.0
 """The longest plausible median interval between samples, s (0.1 Hz): longer is, in
 practice, milliseconds, microseconds or nanoseconds given as seconds."""
+
+SLOW_INTERVAL_S = 0.2
+"""The longest median interval between samples, s (5 Hz), that a file may have without
+declaring its unit (`time_unit`): between it and `MAX_INTERVAL_S` lie both rare slow
+cameras in seconds and every log from 100 Hz to 5 kHz in milliseconds, which only the
+file's author can tell apart."""
+
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+"""The units a file's `time_unit` key may declare, with their length in seconds."""
+
+_TIME_KEYS = ("t", "camera_t")
 
 MIN_OBSERVATIONS = 2
 """The fewest images a feature must be seen in, counting the velocity format's reference
@@ -153,6 +170,8 @@ def _check_size(path, n: int, what: str) -> None:
 
 def _dtype_problem(key: str, dtype: np.dtype) -> str | None:
     """Why an array of this dtype cannot be a key's value (`None`: it can be)."""
+    if key == "time_unit" and dtype.kind == "U":
+        return None
     if dtype.hasobject:
         return f"`{key}` holds Python objects (an object array); save numeric arrays."
     if np.issubdtype(dtype, np.complexfloating):
@@ -319,30 +338,71 @@ def _check_intrinsics(A, key: str) -> None:
         )
 
 
-def _check_time_units(t, key: str) -> None:
-    """The median sample interval within [`MIN_INTERVAL_S`, `MAX_INTERVAL_S`]: seconds."""
+def _rates(interval: float) -> str:
+    """`as ms 1 kHz, as us 1 MHz`: the sample rate `interval` gives in each unit of
+    `TIME_UNITS` but seconds, those within 0.1 Hz to 100 kHz (or all, if none is)."""
+    named = {"ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
+    rates = [(named[u], 1 / (interval * TIME_UNITS[u])) for u in named]
+    plausible = [(u, r) for u, r in rates if 0.1 <= r <= 1e5] or rates
+    return ", ".join(f"in {u} {_hz(r)}" for u, r in plausible)
+
+
+def _hz(rate: float) -> str:
+    for scale, prefix in ((1e6, "M"), (1e3, "k")):
+        if rate >= scale:
+            return f"{rate / scale:.3g} {prefix}Hz"
+    return f"{rate:.3g} Hz"
+
+
+def _check_time_units(t, key: str, declared: bool = False) -> None:
+    """The median sample interval within [`MIN_INTERVAL_S`, `MAX_INTERVAL_S`] and, when the
+    unit is not `declared`, at most `SLOW_INTERVAL_S`: seconds."""
     t = np.asarray(t, float)
     if t.shape[0] < 2:
         return
     interval = float(np.median(np.diff(t)))
-    if interval > MAX_INTERVAL_S:
-        # 10 ms to 10 s per frame in the guessed unit
-        unit = (
-            "milliseconds"
-            if interval < 1e4
-            else "microseconds"
-            if interval < 1e7
-            else ("nanoseconds")
-        )
+    declare = '; if they are seconds, add the key time_unit="s" to the file'
+    if interval > MAX_INTERVAL_S or (interval > SLOW_INTERVAL_S and not declared):
+        longest = MAX_INTERVAL_S if declared else SLOW_INTERVAL_S
         raise DataFormatError(
-            f"`{key}` looks like {unit} (median interval {interval:g}): give seconds "
-            f"(a plausible interval is {MIN_INTERVAL_S:g} to {MAX_INTERVAL_S:g} s)."
+            f"`{key}` does not look like seconds: its median interval {interval:g} would be "
+            f"{_hz(1 / interval)} in seconds, {_rates(interval)}; give seconds (a median "
+            f"interval of {MIN_INTERVAL_S:g} to {longest:g} s) or declare the unit with "
+            f'the key time_unit ("ms", "us", "ns"){"" if declared else declare}.'
         )
     if interval < MIN_INTERVAL_S:
         raise DataFormatError(
-            f"`{key}`'s median interval is {interval:g} s, faster than {1 / MIN_INTERVAL_S:g} "
-            "Hz: likely not seconds; give seconds."
+            f"`{key}`'s median interval is {interval:g} s, faster than {_hz(1 / MIN_INTERVAL_S)}"
+            ": likely not seconds; give seconds."
         )
+
+
+def _declared_unit(path, arrays: dict) -> bool:
+    """Converts `arrays`' times to seconds by their `time_unit` key (then `"s"`); returns
+    whether the file declared a unit."""
+    if "time_unit" not in arrays:
+        return False
+    unit = arrays["time_unit"]
+    if unit.shape != () or unit.dtype.kind != "U" or str(unit) not in TIME_UNITS:
+        raise DataFormatError(
+            f"{path}: `time_unit` must be one string among {', '.join(map(repr, TIME_UNITS))}; "
+            f"got {unit.tolist()!r}."
+        )
+    factor = TIME_UNITS[str(unit)]
+    keys = [k for k in _TIME_KEYS if k in arrays and np.issubdtype(arrays[k].dtype, np.number)]
+    origin = 0
+    if keys and all(np.issubdtype(arrays[k].dtype, np.integer) and arrays[k].size for k in keys):
+        # integer clocks (a ROS log's nanoseconds since the epoch, ~1.7e18) counted from
+        # their earliest time in integers: as float64 seconds since the epoch, they would
+        # keep only ~0.2 us
+        origin = min(int(arrays[k].min()) for k in keys)
+    for key in keys:
+        v = arrays[key]
+        if origin:
+            v = v.astype(np.int64) - np.int64(origin)
+        arrays[key] = np.asarray(v, np.float64) * factor
+    arrays["time_unit"] = "s"
+    return True
 
 
 def _check_observations(seen, extra: int = 0, what: str = "feature") -> None:
@@ -401,6 +461,7 @@ class _Format:
                     f"missing {missing}."
                 )
             arrays = _read_members(path, zf, keys)
+        _declared_unit(path, arrays)
         data = cls(**arrays)
         try:
             data.validate()
@@ -456,7 +517,14 @@ class _Format:
         t = np.asarray(getattr(self, key))
         if t.shape[0] < 2 or not np.all(np.diff(t) > 0):
             raise DataFormatError(f"`{key}` must hold at least 2 strictly increasing times.")
-        _check_time_units(t, key)
+        _check_time_units(t, key, declared=self.time_unit is not None)
+
+    def _check_unit(self):
+        if self.time_unit is not None and str(self.time_unit) != "s":
+            raise DataFormatError(
+                f"`time_unit` is {str(self.time_unit)!r}: in memory, times are seconds "
+                '(`time_unit` "s" or None); `load` converts a file\'s declared unit.'
+            )
 
 
 @dataclass
@@ -473,6 +541,7 @@ class VelocityData(_Format):
     velocity: np.ndarray | None = None
     K: np.ndarray | None = None
     rho: np.ndarray | None = None
+    time_unit: str | None = None
 
     REQUIRED = ("t", "pixels", "A", "R_star", "s1", "known_length")
     NAME = "velocity"
@@ -495,6 +564,7 @@ class VelocityData(_Format):
             ("rho", (6,)),
         ):
             self._shape(key, shape)
+        self._check_unit()
         self._times()
         self._finite("t", "A", "R_star", "s1", "known_length", "velocity", "K", "rho")
         _check_intrinsics(self.A, "A")
@@ -537,6 +607,7 @@ class MovingPointData(_Format):
     D: np.ndarray
     depth_guess: np.ndarray | None = None
     position: np.ndarray | None = None
+    time_unit: str | None = None
 
     REQUIRED = ("t", "pixels", "A", "camera_t", "camera_velocity", "D")
     NAME = "structure"
@@ -551,6 +622,7 @@ class MovingPointData(_Format):
         self._shape("D", (3,))
         self._shape("position", (n_t, 3))
         self._shape("depth_guess", ())
+        self._check_unit()
         self._times()
         self._times("camera_t")
         self._finite("t", "A", "camera_t", "camera_velocity", "D", "position", "depth_guess")
@@ -581,6 +653,7 @@ class StaticPointsData(_Format):
     R_c_nominal: np.ndarray
     x_c_nominal: np.ndarray
     features: np.ndarray | None = None
+    time_unit: str | None = None
 
     REQUIRED = (
         "t",
@@ -614,6 +687,7 @@ class StaticPointsData(_Format):
             ("features", (n - k, 3)),
         ):
             self._shape(key, shape)
+        self._check_unit()
         self._times()
         self._finite(
             "t",
@@ -658,9 +732,11 @@ def save_tracks_csv(path, t, pixels) -> Path:
     return path
 
 
-def load_tracks_csv(path, n_features: int | None = None):
+def load_tracks_csv(path, n_features: int | None = None, time_unit: str | None = None):
     """The inverse of `save_tracks_csv`: `(t (N,), pixels (N, n, 2))`, NaN where a feature
-    has no row at a time. `n_features` fixes n (default: the largest index + 1). An empty,
+    has no row at a time. `n_features` fixes n (default: the largest index + 1);
+    `time_unit` (`"s"`, `"ms"`, `"us"`, `"ns"`; default: seconds, checked as the module
+    docstring says) declares the unit of the column `t`, returned in seconds. An empty,
     binary or non-UTF-8 file, a row without four values, a value that is not a number, a
     time that is not finite or not in seconds, and two rows for one feature at one time
     raise `DataFormatError` naming the file (and the line)."""
@@ -711,7 +787,14 @@ def load_tracks_csv(path, n_features: int | None = None):
             f"{path}: line {rows[dup][0]} repeats feature {idx[dup]} at t = {t_all[dup]!r}."
         )
     try:
-        _check_time_units(t, "t")
+        if time_unit is not None:
+            if time_unit not in TIME_UNITS:
+                raise DataFormatError(
+                    f"`time_unit` must be one of {', '.join(map(repr, TIME_UNITS))}; "
+                    f"got {time_unit!r}."
+                )
+            t = t * TIME_UNITS[time_unit]
+        _check_time_units(t, "t", declared=time_unit is not None)
     except DataFormatError as e:
         raise DataFormatError(f"{path}: {e}") from None
     pixels = np.full((t.shape[0], n, 2), np.nan)
