@@ -179,6 +179,47 @@ def test_absurd_run_counts_are_refused(no_study, capsys):
     assert "2e+09 points" in err  # counted from the text: no grid of that size is built
 
 
+def test_durations_and_methods_are_refused_before_building(capsys):
+    """A `--duration` past `MAX_STEPS` samples (a run would exhaust memory building its
+    scene) and an unknown `--method` (from the builder's return annotation, the closest
+    suggested) are refused before the problem is built."""
+    err = _refused(["run", "velocity", "--duration", "1e9"], capsys)
+    assert "1e+12 samples" in err and "MAX_STEPS" in err
+    err = _refused(["velocity", "--duration", "1e9"], capsys)
+    assert "1e+12 samples" in err
+    err = _refused(["sweep", "point-depth", "--duration", "2e5", "--rate", "1000"], capsys)
+    assert "2e+08 samples" in err
+    err = _refused(["run", "velocity", "--method", "ekff"], capsys)
+    assert "no method 'ekff' (did you mean 'ekf'?)" in err
+    # a builder without a return annotation: its methods are checked once it is built
+    import tests.studies.slow_toy  # noqa: F401  (registers slow-toy)
+    from visjax.studies import registered
+
+    assert registered("slow-toy").problem_classes() == ()
+    assert [c.__name__ for c in registered("homography").problem_classes()] == [
+        "HomographyProblem",
+        "VelocityFrontEndProblem",
+    ]
+
+
+def test_a_comparison_too_long_is_refused_after_its_first_seed(tmp_path, capsys):
+    """A million seeds of a problem whose seed takes about 1 s (4 calls of 0.25 s): the
+    first seed puts the rest at ~280 h, past `--max-hours` (24 by default): refused then,
+    exit 2, one line with the estimate; nothing written."""
+    out = tmp_path / "out"
+    argv = [*TOY, "compare", "slow-toy", "--seeds", "1000000", "--quiet", "--out", str(out)]
+    started = time.perf_counter()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("visjax: error: compare slow-toy: 1000000 seeds would take about")
+    assert err.count("\n") == 1 and "--max-hours" in err, err
+    hours = float(re.search(r"about ([0-9.e+]+) h", err)[1])
+    assert 150 < hours < 1000, err  # ~1 s a seed, measured
+    assert time.perf_counter() - started < 60 and not out.exists()
+    # the limit is the user's to raise: 3 seeds under 1 h run
+    assert main([*argv[:5], "3", "--quiet", "--max-hours", "1"]) == 0
+
+
 def test_a_study_larger_than_the_memory_is_refused(no_study, monkeypatch, capsys):
     monkeypatch.setattr(verbs, "available_memory", lambda: 100.0)  # bytes
     for argv in (

@@ -197,7 +197,9 @@ def build_parser() -> argparse.ArgumentParser:
     run = _verb(sub, "run", "one method of a problem once", seeds=None, noise=0.0, grid=False)
     _arg(run, "--method", None, None, "the method (default: the estimator)")
     help = "a problem's methods on identical noisy inputs"
-    _verb(sub, "compare", help, seeds=4, noise=0.1, grid=False)
+    cmp = _verb(sub, "compare", help, seeds=4, noise=0.1, grid=False)
+    hours = "refuse, after the first seed, a comparison estimated to take longer (default 24)"
+    _arg(cmp, "--max-hours", _positive, 24.0, hours)
     help = "a grid of a problem's parameters over noise seeds"
     sw = _verb(sub, "sweep", help, seeds=8, noise=0.1, grid=True)
     _arg(sw, "--resume", help="continue an interrupted sweep from its parts", action="store_true")
@@ -274,6 +276,15 @@ def _check(a) -> None:
             _set_name(name)
     if a.command in ("velocity", "static_points") and a.duration * getattr(a, "rate", 1e3) < 2:
         raise argparse.ArgumentTypeError("--duration times the rate must give at least 2 samples")
+    if a.command in ("velocity", "moving_point", "static_points", "testbed"):
+        from .estimators import MAX_STEPS
+
+        samples = a.duration * getattr(a, "rate", 1e3)  # the papers' scenes run at 1 kHz
+        if samples > MAX_STEPS:
+            raise argparse.ArgumentTypeError(
+                f"--duration {a.duration:g} s makes {samples:.3g} samples, more than a run "
+                f"takes ({MAX_STEPS:.0e}, visjax.estimators.MAX_STEPS)"
+            )
     if a.command in ("velocity", "moving_point", "static_points") and a.seeds > 1:
         if a.data is not None:
             raise argparse.ArgumentTypeError(
@@ -289,7 +300,9 @@ def _check(a) -> None:
         for module in a.modules or ():
             importlib.import_module(module)
         try:  # the problem's name, options and variants, before any work
-            registered(a.problem).check(a.data, a.duration, a.rate, a.set, a.robust)
+            registered(a.problem).check(
+                a.data, a.duration, a.rate, a.set, a.robust, getattr(a, "method", None)
+            )
         except ValueError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
     from .io import check_output_path

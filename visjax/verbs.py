@@ -37,6 +37,11 @@ MAX_RUNS = 10**9
 tuning's): far beyond any useful study, so that a count above it is a slip of the keyboard
 (refused at once, not found after hours)."""
 
+MAX_HOURS = 24.0
+"""`compare`'s default limit on its run time, hours (`--max-hours`): measured on the first
+seed, a comparison estimated to take longer is refused then (a comparison is not resumable,
+unlike a sweep)."""
+
 RECORD_BYTES = 1024
 """Memory per record of `compare` (a dict of a dozen numbers and names), bytes."""
 
@@ -417,12 +422,15 @@ def compare_command(
     rate: float | None = None,
     variants=None,
     robust: bool = False,
+    max_hours: float = MAX_HOURS,
 ) -> dict:
     """`visjax compare PROBLEM`: every method of the problem (the estimator, its batch
     baselines, its EKF) on identical noisy inputs (`visjax.studies.compare`, noise seeds
     `seed, ..., seed + seeds - 1`), from the problem's scene or a data file (noise added
-    on top of its pixels). Writes `summary.json` (kind `compare`: `records`, one per method
-    and seed, and `problem_settings`), `records.parquet`, `records.csv` and
+    on top of its pixels). A comparison whose first seed puts the whole past `max_hours`
+    is refused then (`Refused`, naming the estimate). Writes `summary.json` (kind
+    `compare`: `records`, one per method and seed, and `problem_settings`),
+    `records.parquet`, `records.csv` and
     `comparison.<format>` (accuracy and latency with their spread over seeds), and prints
     the medians per method (and the predicted standard deviation where the problem has
     one, `AbstractProblem.uncertainty`). With a data file in one of the papers' formats,
@@ -440,7 +448,13 @@ def compare_command(
     for tag, p in problems(
         problem, data, noise, duration, rate, variants, every=False, robust=robust
     ):
-        records = studies.compare(p, seeds=seeds, first_seed=seed, progress=not quiet)
+        try:
+            records = studies.compare(
+                p, seeds=seeds, first_seed=seed, progress=not quiet, max_seconds=max_hours * 3600
+            )
+        except studies.StudyTooLong as e:
+            where = problem if tag is None else f"{problem} [{tag}]"
+            raise Refused(f"compare {where}: {e}: use fewer --seeds or raise --max-hours") from None
         body = {
             "problem": problem,
             "data": None if data is None else str(data),

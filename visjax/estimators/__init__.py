@@ -11,6 +11,8 @@ from ._adaptive_ls import (
     static_points_stream as static_points_stream,
 )
 from ._base import (
+    MAX_SAVED_BYTES as MAX_SAVED_BYTES,
+    MAX_STEPS as MAX_STEPS,
     AbstractAdjoint as AbstractAdjoint,
     AbstractEstimator as AbstractEstimator,
     AbstractJumpEstimator as AbstractJumpEstimator,

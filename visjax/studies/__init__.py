@@ -7,7 +7,7 @@ registry of problems the command line's `run|compare|sweep|tune` verbs look up.
 The papers' problems live in `visjax.papers`.
 """
 
-from ._compare import compare as compare
+from ._compare import StudyTooLong as StudyTooLong, compare as compare
 from ._executors import RayExecutor as RayExecutor
 from ._parts import (
     PartsError as PartsError,

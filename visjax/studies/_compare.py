@@ -13,6 +13,11 @@ import numpy as np
 from .._results import RESULTS, result_names
 
 
+class StudyTooLong(ValueError):
+    """A study whose measured first seed puts its whole run time past the limit it was
+    given (`compare`'s `max_seconds`): refused after one seed, not found after hours."""
+
+
 def compare(
     methods,
     inputs: Callable[[jax.Array], tuple[Any, Any]] | None = None,
@@ -24,6 +29,7 @@ def compare(
     repeats: int = 3,
     progress: bool = False,
     params: Mapping[str, Any] | None = None,
+    max_seconds: float | None = None,
 ) -> list[dict]:
     """Run every method on the same inputs for each noise seed and record how it did.
 
@@ -51,6 +57,9 @@ def compare(
         if the batch answer is to stay current). Default: 1.
     - `repeats`: timed calls per method and seed, after the compiling one; the median is
         reported.
+    - `max_seconds`: a limit on the whole comparison's run time. After the first seed,
+        the rest is estimated from it (its inputs and calls, compilation excluded); past
+        the limit, `StudyTooLong` is raised, naming the estimate. Default: no limit.
 
     **Returns:** one record per (method, seed): `method`, `seed`, `result` (the result
     code's name), `latency_s_per_sample` (median call time / updates), `total_s` (median
@@ -83,6 +92,7 @@ def compare(
             updates={m: problem.updates(m) for m in problem.methods},
             repeats=repeats,
             progress=progress,
+            max_seconds=max_seconds,
         )
     if inputs is None or score is None:
         raise ValueError("`compare(methods, inputs, score)`: `inputs` and `score` are needed.")
@@ -92,6 +102,8 @@ def compare(
         raise ValueError(f"`seeds` must be at least 1; got {seeds}.")
     if repeats < 1:
         raise ValueError(f"`repeats` must be at least 1; got {repeats}.")
+    if max_seconds is not None and not max_seconds > 0:
+        raise ValueError(f"`max_seconds` must be positive; got {max_seconds!r}.")
     if not (isinstance(first_seed, int) and first_seed >= 0):
         raise ValueError(f"`first_seed` must be a non-negative int; got {first_seed!r}.")
     updates = dict(updates or {})
@@ -104,7 +116,9 @@ def compare(
 
     bar = tqdm(total=seeds * len(methods), desc="compare", unit="run", disable=not progress)
     for seed in range(first_seed, first_seed + seeds):
+        started = time.perf_counter()
         data, truth = inputs(jax.random.key(seed))
+        seed_s = time.perf_counter() - started  # the inputs, then every call but compiles
         for name, fn in compiled.items():
             t0 = time.perf_counter()
             sol = jax.block_until_ready(fn(data))
@@ -115,6 +129,7 @@ def compare(
                 jax.block_until_ready(fn(data))
                 times.append(time.perf_counter() - t0)
             total = statistics.median(times)
+            seed_s += sum(times) + (total if seed == first_seed else first)
             records.append(
                 {
                     "method": name,
@@ -127,5 +142,19 @@ def compare(
                 }
             )
             bar.update()
+        if seed == first_seed and max_seconds is not None and seeds > 1:
+            rest = seed_s * (seeds - 1)
+            if rest > max_seconds:
+                bar.close()
+                raise StudyTooLong(
+                    f"{seeds} seeds would take about {_duration(rest)} more ({seed_s:.3g} s a "
+                    f"seed, measured on the first), past the limit of {_duration(max_seconds)}"
+                )
     bar.close()
     return records
+
+
+def _duration(seconds: float) -> str:
+    if seconds >= 3600:
+        return f"{seconds / 3600:.3g} h"
+    return f"{seconds / 60:.3g} min" if seconds >= 60 else f"{seconds:.3g} s"

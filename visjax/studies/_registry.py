@@ -8,11 +8,19 @@ command line: a module named with `visjax --import MODULE`, or an entry point of
 """
 
 import dataclasses
+import difflib
 import inspect
 import re
+import types
+import typing
 from collections.abc import Callable, Sequence
 
+from ..estimators import MAX_STEPS
 from ._problem import AbstractProblem
+
+DEFAULT_RATE_HZ = 1000.0
+"""The sample rate a scene is assumed to have, for the step count of its `--duration`,
+when its builder states none (a `rate_hz` default): the papers' 1 kHz."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,12 +44,51 @@ class Registered:
             return {"*"}
         return {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
 
-    def check(self, data=None, duration=None, rate_hz=None, variants=None, robust=False) -> None:
+    def problem_classes(self) -> tuple[type, ...]:
+        """The problem classes `build`'s return annotation names (`-> VelocityProblem`, or
+        a union of them); empty when it names none."""
+        try:
+            ret = typing.get_type_hints(self.build).get("return")
+        except Exception:  # an annotation that does not resolve: nothing to learn
+            return ()
+        members = typing.get_args(ret) if isinstance(ret, types.UnionType) else (ret,)
+        classes = tuple(c for c in members if isinstance(c, type))
+        if not classes or not all(issubclass(c, AbstractProblem) for c in classes):
+            return ()
+        return classes
+
+    def check(
+        self, data=None, duration=None, rate_hz=None, variants=None, robust=False, method=None
+    ) -> None:
         """The command line's options for this problem, checked before any work: a
         `ValueError` names an option it does not take (`robust`: its builder's `robust`
-        option), an unknown variant, or a scene's option given with a data file."""
+        option), an unknown variant, a scene's option given with a data file, a
+        `--duration` whose samples (at `rate_hz`, the builder's default rate or
+        `DEFAULT_RATE_HZ`) exceed `visjax.estimators.MAX_STEPS`, and a `method` that no
+        class of `problem_classes()` has (the built problem checks it again)."""
         if data is not None and (duration is not None or rate_hz is not None):
             raise ValueError("--duration and --rate apply to the problem's scene, not to --data")
+        if duration is not None:
+            default = inspect.signature(self.build).parameters.get("rate_hz")
+            rate = rate_hz
+            if rate is None and default is not None and isinstance(default.default, int | float):
+                rate = float(default.default)
+            rate = DEFAULT_RATE_HZ if rate is None else rate
+            if duration * rate > MAX_STEPS:
+                raise ValueError(
+                    f"--duration {duration:g} s at {rate:g} Hz makes {duration * rate:.3g} "
+                    f"samples, more than a run takes ({MAX_STEPS:.0e}, "
+                    "visjax.estimators.MAX_STEPS): give a shorter --duration"
+                )
+        classes = self.problem_classes()
+        if method is not None and classes:
+            known = list(dict.fromkeys(m for c in classes for m in c.methods))
+            if method not in known:
+                close = difflib.get_close_matches(method, known, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise ValueError(
+                    f"problem {self.name!r} has no method {method!r}{hint}; choose from {known}"
+                )
         accepted = self.options()
         given = {"data": data, "duration": duration, "rate_hz": rate_hz, "robust": robust or None}
         for option, value in given.items():
