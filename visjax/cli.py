@@ -226,6 +226,8 @@ def build_parser() -> argparse.ArgumentParser:
     planar = "a planar scene: cut the tracks that do not follow the frames' homography"
     _arg(tr, "--planar", help=planar, action="store_true")
     _arg(tr, "--homography-threshold", _positive, 3.0, "px, the --planar test (default 3)")
+    damaged = "track a video whose decoder reports damaged frames (they are concealed)"
+    _arg(tr, "--allow-damaged", help=damaged, action="store_true")
     _arg(tr, "--quiet", help="no progress bar and no summary", action="store_true")
     tr.set_defaults(out_is_file=True)
 

@@ -232,6 +232,7 @@ def track_report(
     planar=False,
     homography_threshold=3.0,
     quiet=False,
+    allow_damaged=False,
 ) -> dict:
     """Jang's thesis, sections 2.4 and 5.1: a video to pixel tracks by pyramidal KLT with a
     forward-backward check (`visjax.frontend.track_frames`).
@@ -241,7 +242,8 @@ def track_report(
     (N, n, 2), NaN where a feature is not seen, or `.csv` (`visjax.io.save_tracks_csv`);
     `detector`, `max_features`, `fb_threshold`, `planar`, `homography_threshold` as in
     `track_frames`; `fps` overrides the video's frame rate; `quiet` no progress bar and no
-    summary line.
+    summary line; `allow_damaged` tracks a video whose decoder reports damage
+    (`read_video`).
 
     **Returns:** the summary: frames, features, features in frame 0, fraction tracked, and
     `lost_tracks`: how many tracks each check ended (`visjax.frontend.LOST_REASONS`; with
@@ -256,7 +258,7 @@ def track_report(
     out = Path(out)
     if out.suffix.lower() not in (".npz", ".csv"):
         raise ValueError(f"{out}: the tracks file must end in .npz or .csv.")
-    frames, video_fps = read_video(video)
+    frames, video_fps = read_video(video, allow_damaged=allow_damaged)
     if frames.shape[0] < 2:
         raise DataFormatError(
             f"{video}: {frames.shape[0]} frame (a still image?); tracking needs at least 2."

@@ -382,35 +382,49 @@ def test_cli_track_bad_files(tmp_path, capsys):
 
 
 def test_cli_track_refuses_damaged_videos_and_stills(tmp_path, capsys):
-    """A corrupt MP4 (fewer frames decode than its container declares), a still image
-    renamed `.mp4`, a one-frame NPZ: one line, exit status 2, nothing written."""
+    """A corrupt MP4 (its decoder's complaints, read while decoding; or fewer frames
+    decode than its container declares), a still image renamed `.mp4`, a one-frame NPZ:
+    one line, exit status 2, nothing written; `--allow-damaged` tracks a video whose
+    damage the decoder concealed."""
     import cv2
 
     from visjax.cli import main
 
     frames = _frames()[:24]
-    raw = bytearray(write_video(tmp_path / "good.mp4", frames, 30.0).read_bytes())
-    middle = len(raw) // 2
-    raw[middle : middle + 1024] = bytes(i % 251 for i in range(1024))
-    (tmp_path / "corrupt.mp4").write_bytes(bytes(raw))
+    raw = write_video(tmp_path / "good.mp4", frames, 30.0).read_bytes()
+
+    def garbled(name, size):  # `size` bytes in the middle of the stream overwritten
+        data = bytearray(raw)
+        data[len(raw) // 2 : len(raw) // 2 + size] = bytes(i % 251 for i in range(size))
+        (tmp_path / name).write_bytes(bytes(data))
+        return tmp_path / name
+
+    concealed, broken = garbled("concealed.mp4", 64), garbled("broken.mp4", 1024)
     png = tmp_path / "still.png"
     cv2.imwrite(str(png), frames[0])
     png.rename(tmp_path / "still.mp4")
     write_video(tmp_path / "one.npz", frames[:1], 30.0)
     out = tmp_path / "out" / "tracks.npz"
     for name, words in (
-        ("corrupt.mp4", "a damaged video"),
+        ("concealed.mp4", "the decoder reported"),
+        ("broken.mp4", "a damaged video"),
         ("still.mp4", "tracking needs at least 2"),
         ("one.npz", "tracking needs at least 2"),
     ):
         assert main(["track", str(tmp_path / name), "--out", str(out), "--quiet"]) == 2
         err = capsys.readouterr().err
-        last = err.strip().splitlines()[-1]  # FFmpeg's own complaints may come first
-        assert last.startswith("visjax: error:") and words in last, err
-        assert err.count("visjax:") == 1
+        assert err.startswith("visjax: error:") and words in err and err.count("\n") == 1, err
     assert not out.parent.exists()
-    back, _ = read_video(tmp_path / "good.mp4")  # the intact file still reads whole
+    back, _ = read_video(tmp_path / "good.mp4")  # the intact file reads whole, no complaint
     assert back.shape[0] == 24
+    # every frame of the concealed one decodes: tracked when allowed
+    back, _ = read_video(concealed, allow_damaged=True)
+    assert back.shape[0] == 24
+    assert main(["track", str(concealed), "--out", str(out), "--quiet", "--allow-damaged"]) == 0
+    assert out.is_file()
+    # the broken one ends early: refused even when allowed
+    with pytest.raises(ValueError, match="declares 24 frames but only"):
+        read_video(broken, allow_damaged=True)
 
 
 def test_bad_inputs_raise_the_documented_errors(tmp_path):

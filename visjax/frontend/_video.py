@@ -1,8 +1,16 @@
 """Grey video files in and out: MP4 through OpenCV, or a lossless NPZ (never jit)."""
 
+import contextlib
+import os
+import re
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
+
+# a line of FFmpeg's log: `[mpeg4 @ 0x55d1c0a3e780] ac-tex damaged at 3 0`
+_DECODER_LINE = re.compile(r"^\[[^\]]+ @ 0x[0-9a-fA-F]+\] ")
 
 
 def check_frames(frames, name: str = "frames") -> np.ndarray:
@@ -62,7 +70,34 @@ def write_video(path, frames, fps) -> Path:
     return path
 
 
-def read_video(path) -> tuple[np.ndarray, float]:
+@contextlib.contextmanager
+def _decoder_log():
+    """What C code (FFmpeg's log, inside OpenCV) writes to file descriptor 2 during the
+    block: `box["lines"]` after it. The descriptor is restored at the end of the block;
+    lines that are not FFmpeg's are written back to it then (delayed, never lost)."""
+    box = {"lines": []}
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no descriptor 2: nothing to read
+        yield box
+        return
+    with tempfile.TemporaryFile() as log:
+        os.dup2(log.fileno(), 2)
+        try:
+            yield box
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            log.seek(0)
+            lines = log.read().decode("utf-8", "replace").splitlines()
+            box["lines"] = [ln for ln in lines if _DECODER_LINE.match(ln)]
+            others = [ln for ln in lines if not _DECODER_LINE.match(ln)]
+            if others:
+                os.write(2, ("\n".join(others) + "\n").encode())
+
+
+def read_video(path, *, allow_damaged: bool = False) -> tuple[np.ndarray, float]:
     """Read a video as grey frames.
 
     **Arguments:** `path`: a video OpenCV can decode (`cv2.VideoCapture`; colour frames are
@@ -75,6 +110,11 @@ def read_video(path) -> tuple[np.ndarray, float]:
     OpenCV cannot open or decode, a damaged one (fewer frames decode than its container
     declares: it is truncated or corrupt from that frame on), an NPZ without the keys, with
     no frames or frames that are not uint8, or with an `fps` that is not positive.
+
+    A damaged stream often still decodes every frame, its broken blocks concealed (filled
+    from neighbours): the decoder's complaints (FFmpeg's log lines, read from file
+    descriptor 2 while decoding) then make it a `DataFormatError` too, naming the first;
+    `allow_damaged=True` returns the frames anyway (the complaints still printed).
     """
     from ..io import DataFormatError
 
@@ -94,22 +134,34 @@ def read_video(path) -> tuple[np.ndarray, float]:
             raise DataFormatError(f"{path}: {e}") from None
     import cv2
 
-    capture = cv2.VideoCapture(str(path))
     frames = []
-    try:
-        if not capture.isOpened():
-            raise DataFormatError(f"{path}: OpenCV cannot open it as a video.")
-        fps = float(capture.get(cv2.CAP_PROP_FPS))
-        declared = int(max(capture.get(cv2.CAP_PROP_FRAME_COUNT), 0))
-        while True:
-            ok, frame = capture.read()
-            if not ok:
-                break
-            if frame.ndim == 3:
-                frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-            frames.append(frame)
-    finally:
-        capture.release()
+    with _decoder_log() as log:
+        capture = cv2.VideoCapture(str(path))
+        try:
+            opened = capture.isOpened()
+            fps = float(capture.get(cv2.CAP_PROP_FPS))
+            declared = int(max(capture.get(cv2.CAP_PROP_FRAME_COUNT), 0))
+            while opened:
+                ok, frame = capture.read()
+                if not ok:
+                    break
+                if frame.ndim == 3:
+                    frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+                frames.append(frame)
+        finally:
+            capture.release()
+    complaints = log["lines"]
+    if not opened:
+        said = f" ({complaints[0]})" if complaints else ""
+        raise DataFormatError(f"{path}: OpenCV cannot open it as a video{said}.")
+    if complaints and allow_damaged:
+        os.write(2, ("\n".join(complaints) + "\n").encode())
+    elif complaints:
+        raise DataFormatError(
+            f"{path}: a damaged video: the decoder reported {len(complaints)} error(s), the "
+            f"first `{complaints[0]}` (damaged blocks are filled in, not the scene); "
+            "use an intact copy, or track it anyway (--allow-damaged)."
+        )
     if not frames:
         raise DataFormatError(f"{path}: no frame could be decoded.")
     if len(frames) < declared - 1:  # a container's count may be one off, never more
