@@ -64,7 +64,8 @@ def getkey():
 @pytest.fixture
 def no_jaxtyping():
     """The user's view for tests of the library's own shape errors: jaxtyping's runtime
-    checks (on for the test run) off, so the `ValueError` naming the argument is tested."""
+    checks (on in CI's shape-checked run) off, so the `ValueError` naming the argument is
+    tested."""
     from tests.helpers import without_jaxtyping
 
     with without_jaxtyping():

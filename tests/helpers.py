@@ -37,8 +37,9 @@ def central_difference(f, x, h, *args):
 
 
 class without_jaxtyping:
-    """The user's view: jaxtyping's runtime checks (on for the test run) off inside the
-    block, so that the library's own `ValueError` for a wrong shape is what is tested."""
+    """The user's view: jaxtyping's runtime checks (on in CI's shape-checked run of the
+    unit suite) off inside the block, so that the library's own `ValueError` for a wrong
+    shape is what is tested."""
 
     def __enter__(self):
         import jaxtyping

@@ -216,8 +216,8 @@ def test_a_comparison_too_long_is_refused_after_its_first_seed(tmp_path, capsys)
     hours = float(re.search(r"about ([0-9.e+]+) h", err)[1])
     assert 150 < hours < 1000, err  # ~1 s a seed, measured
     assert time.perf_counter() - started < 60 and not out.exists()
-    # the limit is the user's to raise: 3 seeds under 1 h run
-    assert main([*argv[:5], "3", "--quiet", "--max-hours", "1"]) == 0
+    # the limit is the user's to raise: 2 seeds under 1 h run
+    assert main([*argv[:5], "2", "--quiet", "--max-hours", "1"]) == 0
 
 
 def test_a_study_larger_than_the_memory_is_refused(no_study, monkeypatch, capsys):

@@ -51,6 +51,7 @@ def test_fuzz_float64_batch_1000():
     _check(report)
 
 
+@pytest.mark.slow  # the unit tier's time: fuzzing is a slow-tier job (batch 1000, float32)
 def test_fuzz_float64_batch_1():
     """One input per call, for the functions whose results come from reductions over points
     or matrix factorisations (what a large batch could hide); the rest, and the stream

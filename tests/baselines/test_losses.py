@@ -75,6 +75,8 @@ def test_covariance_of_a_linear_fit():
     assert np.all(np.isnan(cov))  # no more residuals than unknowns: no estimate
 
 
+@pytest.mark.slow  # the unit tier's time: a Monte-Carlo check (the linear fit's covariance
+# stays in the unit tier, test_covariance_of_a_linear_fit)
 def test_frame_pose_covariance_predicts_the_monte_carlo_spread():
     """One frame of the section-6 target (Chitrakaran et al.) with 200 draws of 0.1 px
     noise, as 200 frames: the predicted standard deviation of each pose coordinate (the

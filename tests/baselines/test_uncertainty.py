@@ -51,6 +51,8 @@ def test_bundle_adjustment_covariance_predicts_the_spread(scene):
     np.testing.assert_allclose(predicted, spread, rtol=0.2)
 
 
+@pytest.mark.slow  # the unit tier's time: five bundle adjustments compiled (robust losses
+# keep unit tests in test_losses.py and test_triangulation_robust.py)
 def test_robust_bundle_adjustment_on_tracks_with_outliers(scene):
     """One track in ten (an unknown feature's) thrown 17 px off for a third of its frames
     (a false match that the tracker followed), 0.5 px noise: least squares is off by

@@ -183,6 +183,7 @@ def test_problem_estimator_and_least_squares_on_the_same_draws():
     assert np.all(np.isnan(np.asarray(ekf.metrics["depth_error"])[codes != 0]))
 
 
+@pytest.mark.slow  # the unit tier's time: `compare` has its smoke test (test_command_smoke)
 def test_compare_command(tmp_path):
     """`visjax compare point-depth`: the records of both methods with their result codes,
     through the generic command (the registry line is the only change it needed)."""
