@@ -16,6 +16,14 @@ failure): the least work any loop over this state does per step. Its final state
 checked against `run`'s (to 1e-9) before it is timed. `ratio_to_bare_update` is what
 `run`'s loop costs over it.
 
+Two more references, the same work as `run`'s loop at its least: the bare update plus the
+output $\hat v = J^{-1}\hat\kappa$ (Theorem 2), the windowed squared error against the
+truth, one bound test of the new state and the freeze of a failed run, written by hand
+with no runner around it: `hand_fused` vmapped over the gains as `run` is (the batch first
+in every array), `hand_fused_batch_last` on (6, batch) arrays with no `vmap` (the layout
+XLA's CPU loops vectorise best). Their RMS is checked against `run`'s (to 1e-9) before
+they are timed: what any XLA loop that computes this study's result costs on the machine.
+
     python benchmarks/gain_sweep.py [--batches 1 256 1024 16384] [--duration 1.0]
 """
 
@@ -100,6 +108,59 @@ def main():
 
     bare_study = jax.jit(jax.vmap(bare))
 
+    ts, J_inv, v_true = prepared.ts, prepared.ys.J_inv, prepared.truth
+    inside = (ts >= reducer.t_start) & (ts < reducer.t_end)
+    bound = VelocityEstimator(K=K_EQ63, rho=RHO_EQ63).bound
+
+    def hand_fused(K):
+        # the output at each sample before the step, as `run` reads it
+        def body(c, x):
+            e_hat, eta, sumsq, failed = c
+            e_k, h_k, Ji, v_k, in_k = x
+            e_tilde = e_k - e_hat  # eq. (36)
+            kappa = eta + (K + 1.0) * e_tilde  # eq. (40)
+            v_hat = Ji @ kappa  # Theorem 2
+            sumsq = sumsq + jnp.where(in_k, (v_hat - v_k) ** 2, 0.0)
+            d_eta = (K + 1.0) * e_tilde + rho * jnp.sign(e_tilde)
+            new = (e_hat + h_k * kappa, eta + h_k * d_eta)  # eq. (39), Euler
+            ok = ~failed & jnp.all(jnp.abs(new[0]) < bound) & jnp.all(jnp.abs(new[1]) < bound)
+            e_hat, eta = (jnp.where(ok, a, b) for a, b in zip(new, (e_hat, eta)))
+            return (e_hat, eta, sumsq, ~ok), None
+
+        c0 = (e[0], jnp.zeros_like(e[0]), jnp.zeros_like(e[0]), jnp.array(False))
+        xs = (e[:-1], h, J_inv[:-1], v_true[:-1], inside[:-1])
+        (e_hat, eta, sumsq, _), _ = jax.lax.scan(body, c0, xs)
+        # the last sample is read (its output scored) but not integrated past
+        kappa = eta + (K + 1.0) * (e[-1] - e_hat)
+        sumsq = sumsq + jnp.where(inside[-1], (J_inv[-1] @ kappa - v_true[-1]) ** 2, 0.0)
+        return jnp.sqrt(sumsq / jnp.sum(inside).astype(sumsq.dtype))
+
+    def hand_fused_batch_last(K):  # K: (6, batch)
+        def body(c, x):
+            e_hat, eta, sumsq, failed = c
+            e_k, h_k, Ji, v_k, in_k = x
+            e_tilde = e_k[:, None] - e_hat  # eq. (36)
+            kappa = eta + (K + 1.0) * e_tilde  # eq. (40)
+            v_hat = Ji @ kappa  # Theorem 2
+            sumsq = sumsq + jnp.where(in_k, (v_hat - v_k[:, None]) ** 2, 0.0)
+            d_eta = (K + 1.0) * e_tilde + rho[:, None] * jnp.sign(e_tilde)
+            new = (e_hat + h_k * kappa, eta + h_k * d_eta)  # eq. (39), Euler
+            ok = jnp.all(jnp.abs(new[0]) < bound, axis=0) & jnp.all(jnp.abs(new[1]) < bound, axis=0)
+            ok = ~failed & ok
+            e_hat, eta = (jnp.where(ok, a, b) for a, b in zip(new, (e_hat, eta)))
+            return (e_hat, eta, sumsq, ~ok), None
+
+        zeros = jnp.zeros_like(K)
+        c0 = (jnp.broadcast_to(e[0][:, None], K.shape), zeros, zeros, jnp.zeros(K.shape[1], bool))
+        xs = (e[:-1], h, J_inv[:-1], v_true[:-1], inside[:-1])
+        (e_hat, eta, sumsq, _), _ = jax.lax.scan(body, c0, xs)
+        kappa = eta + (K + 1.0) * (e[-1][:, None] - e_hat)
+        sumsq = sumsq + jnp.where(inside[-1], (J_inv[-1] @ kappa - v_true[-1][:, None]) ** 2, 0.0)
+        return jnp.sqrt(sumsq / jnp.sum(inside).astype(sumsq.dtype)).T
+
+    fused_study = jax.jit(jax.vmap(hand_fused))
+    fused_last_study = jax.jit(hand_fused_batch_last)
+
     def final_state(K):
         sol = run(VelocityEstimator(K=K, rho=RHO_EQ63), prepared, saveat=SaveAt(outputs=False))
         return sol.final_state.e_hat, sol.final_state.eta
@@ -109,6 +170,11 @@ def main():
         gap = float(jnp.max(jnp.abs(a - b) / (1.0 + jnp.abs(a))))
         if gap > 1e-9:
             raise SystemExit(f"the bare update is not the estimator's step: gap {gap:.2e}")
+    rms_run = study(K4)
+    for name, rms in (("hand_fused", fused_study(K4)), ("batch_last", fused_last_study(K4.T))):
+        gap = float(jnp.max(jnp.abs(rms - rms_run) / jnp.abs(rms_run)))
+        if not gap <= 1e-9:
+            raise SystemExit(f"the {name} loop does not compute `run`'s RMS: gap {gap:.2e}")
 
     def timed(compiled, Ks):
         jax.block_until_ready(compiled(Ks))
@@ -127,6 +193,11 @@ def main():
         bare_compiled = bare_study.lower(Ks).compile()
         ns = 1e9 * timed(compiled, Ks) / (batch * steps)
         ns_bare = 1e9 * timed(bare_compiled, Ks) / (batch * steps)
+        fused_compiled = fused_study.lower(Ks).compile()
+        ns_fused = 1e9 * timed(fused_compiled, Ks) / (batch * steps)
+        KsT = Ks.T
+        last_compiled = fused_last_study.lower(KsT).compile()
+        ns_last = 1e9 * timed(last_compiled, KsT) / (batch * steps)
         rows.append(
             {
                 "batch": batch,
@@ -135,6 +206,11 @@ def main():
                 "bare_update_ns_per_trajectory_step": ns_bare,
                 "bare_update_kernels_per_step": loop_kernels(bare_compiled),
                 "ratio_to_bare_update": ns / ns_bare,
+                "hand_fused_ns_per_trajectory_step": ns_fused,
+                "hand_fused_kernels_per_step": loop_kernels(fused_compiled),
+                "hand_fused_batch_last_ns_per_trajectory_step": ns_last,
+                "hand_fused_batch_last_kernels_per_step": loop_kernels(last_compiled),
+                "ratio_to_hand_fused": ns / ns_fused,
             }
         )
     base = rows[0]["ns_per_trajectory_step"]

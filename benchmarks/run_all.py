@@ -204,8 +204,20 @@ def table(results: dict) -> str:
                 f"{_fmt(row['ns_per_trajectory_step'])} ns per trajectory-step,"
                 f" {row['kernels_per_step']} kernels per step",
                 f"the bare Euler update alone {_fmt(row['bare_update_ns_per_trajectory_step'])}"
-                f" ns, {row['bare_update_kernels_per_step']} kernels",
-                f"{_fmt(row['ratio_to_bare_update'])}x the bare update",
+                f" ns, {row['bare_update_kernels_per_step']} kernels"
+                + (
+                    "; the same output, RMS, bound test and freeze written by hand"
+                    f" {_fmt(row['hand_fused_ns_per_trajectory_step'])} ns (batch last:"
+                    f" {_fmt(row['hand_fused_batch_last_ns_per_trajectory_step'])} ns)"
+                    if "hand_fused_ns_per_trajectory_step" in row
+                    else ""
+                ),
+                f"{_fmt(row['ratio_to_bare_update'])}x the bare update"
+                + (
+                    f", {_fmt(row['ratio_to_hand_fused'])}x the loop written by hand"
+                    if "ratio_to_hand_fused" in row
+                    else ""
+                ),
                 "<= 10 ns at batch 1,024" if row["batch"] == 1024 else "(reported)",
                 _met(row["ns_per_trajectory_step"] <= 10) if row["batch"] == 1024 else "-",
             )
