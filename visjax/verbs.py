@@ -651,11 +651,12 @@ def _refuse_finished(folder: Path, parts: Path, resume: bool, force: bool) -> No
     import json
 
     from .io import user_path
+    from .studies._parts import clear_parts
 
     final = Path(user_path(str(folder)))
     summary = final / "summary.json"
     if force:
-        shutil.rmtree(parts, ignore_errors=True)
+        clear_parts(parts)  # only what a sweep wrote there; a link is never followed
         return
     if resume or not summary.exists():
         return

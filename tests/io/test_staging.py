@@ -157,3 +157,134 @@ def test_one_file_is_staged_too(tmp_path):
         staged.write_text("t,x\n")
     assert final.read_text() == "t,x\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["deep"]
+
+
+def _snapshot(folder) -> dict:
+    """Every file under `folder` (links not followed) with its bytes."""
+    out = {}
+    for path in sorted(folder.rglob("*")):
+        if path.is_symlink():
+            out[str(path.relative_to(folder))] = ("link", str(path.readlink()))
+        elif path.is_file():
+            out[str(path.relative_to(folder))] = path.read_bytes()
+    return out
+
+
+@pytest.mark.parametrize(
+    "entries", [[".."], ["."], ["../sibling.txt", "/etc"], ["", "a/b", "..\\x"]]
+)
+def test_a_manifest_naming_dot_dot_or_a_path_removes_nothing(tmp_path, entries, capsys):
+    """A `.visjax-outputs.json` anyone left in `--out` (a copied folder, a hand edit):
+    entries that are not plain names of the folder are never removed (issue 44)."""
+    parent = tmp_path / "parent"
+    final = parent / "out"
+    final.mkdir(parents=True)
+    (parent / "sibling.txt").write_text("beside --out")
+    (final / "mine.txt").write_text("in --out")
+    (final / MANIFEST).write_text(json.dumps({"command": "compare", "entries": entries}))
+    before = _snapshot(parent)
+    with staged_output(final, command="compare") as staged:
+        (staged / "records.csv").write_text("1")
+    after = _snapshot(parent)
+    assert after.pop("out/records.csv") == b"1"
+    after.pop(f"out/{MANIFEST}")
+    before.pop(f"out/{MANIFEST}")
+    assert after == before  # byte-identical: nothing of the user's removed or changed
+    assert "left as it is" in capsys.readouterr().err
+
+
+def test_a_forged_or_stale_entry_is_not_removed(tmp_path):
+    """A plain name in the manifest without the fingerprint the command recorded (a
+    forged manifest), or an output the user changed since: left as it is; an output of
+    the same name is then kept aside, never written over the user's."""
+    final = tmp_path / "out"
+    final.mkdir()
+    (final / "data.npz").write_bytes(b"users data")
+    (final / MANIFEST).write_text(json.dumps({"command": "compare", "entries": ["data.npz"]}))
+    with staged_output(final, command="compare") as staged:
+        (staged / "records.csv").write_text("1")
+    assert (final / "data.npz").read_bytes() == b"users data"
+    # an output of the run, then changed by the user: the rerun removes it no longer
+    (final / "records.csv").write_text("edited by hand, longer")
+    with staged_output(final, command="compare") as staged:
+        (staged / "other.csv").write_text("2")
+    assert (final / "records.csv").read_text() == "edited by hand, longer"
+    # an unchanged output of the earlier run is still replaced whole
+    with staged_output(final, command="compare") as staged:
+        (staged / "third.csv").write_text("3")
+    assert not (final / "other.csv").exists() and (final / "third.csv").exists()
+    assert (final / "records.csv").exists() and (final / "data.npz").exists()
+
+
+def test_a_users_folder_is_never_written_into_directly(tmp_path):
+    """A sweep writes its parts straight into `--out/<variant>/parts`: a user's own
+    `I_1/`, `parts/` or a link there is refused before any work, byte-identical."""
+    from visjax.io._staging import written_directly
+
+    final = tmp_path / "out"
+    (final / "I_1").mkdir(parents=True)
+    (final / "I_1" / "notes.txt").write_text("mine")
+    (final / "parts").mkdir()
+    (final / "parts" / "part-0000000.parquet").write_text("my own file of that name")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "keep.txt").write_text("keep")
+    (final / "linked").symlink_to(elsewhere, target_is_directory=True)
+    before = _snapshot(tmp_path)
+    for name in ("I_1/parts", "parts", "linked/parts"):
+        with pytest.raises(OutputConflictError, match=f"'{name.split('/')[0]}' is not from"):
+            with staged_output(final, command="sweep", force=True):
+                written_directly(final / name)
+    assert _snapshot(tmp_path) == before
+
+
+def test_an_interrupted_direct_entry_is_the_next_runs_own(tmp_path):
+    """What a run wrote straight into `--out` before it was interrupted (a sweep's parts)
+    is its own for the next run (`--resume`): it may write there again, and a finished run
+    records it in the manifest."""
+    from visjax.io._staging import written_directly
+
+    final = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with staged_output(final, command="sweep"):
+            written_directly(final / "I_1" / "parts")
+            (final / "I_1" / "parts").mkdir(parents=True)
+            (final / "I_1" / "parts" / "part-0000000.parquet").write_text("p0")
+            raise KeyboardInterrupt
+    with staged_output(final, command="sweep") as staged:
+        written_directly(final / "I_1" / "parts")
+        (final / "I_1" / "parts" / "part-0000001.parquet").write_text("p1")
+        (staged / "I_1").mkdir()
+        (staged / "I_1" / "summary.json").write_text("{}")
+    assert sorted(p.name for p in (final / "I_1" / "parts").iterdir()) == [
+        "part-0000000.parquet",
+        "part-0000001.parquet",
+    ]
+    manifest = json.loads((final / MANIFEST).read_text())
+    assert manifest["entries"] == ["I_1"] and set(manifest["fingerprints"]) == {"I_1"}
+    assert not list(final.glob(".visjax-direct*"))
+
+
+def test_clear_parts_removes_only_a_sweeps_files(tmp_path):
+    """`--force` on a sweep clears its parts folder of what a sweep writes, nothing else;
+    through a link, nothing at all."""
+    from visjax.studies._parts import PartsError, clear_parts
+
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    for name in ("part-0000000.parquet", "manifest.json", ".manifest.json.tmp1"):
+        (parts / name).write_text("sweep")
+    (parts / "mine.txt").write_text("mine")
+    clear_parts(parts)
+    assert [p.name for p in parts.iterdir()] == ["mine.txt"]
+    (parts / "mine.txt").unlink()
+    (parts / "part-0000000.parquet").write_text("sweep")
+    clear_parts(parts)
+    assert not parts.exists()  # emptied, then removed
+    target = tmp_path / "target"
+    target.mkdir()
+    (target / "part-0000000.parquet").write_text("not through a link")
+    (tmp_path / "link").symlink_to(target, target_is_directory=True)
+    with pytest.raises(PartsError, match="symbolic link"):
+        clear_parts(tmp_path / "link")
+    assert (target / "part-0000000.parquet").read_text() == "not through a link"

@@ -5,9 +5,11 @@ record name the final folder, never the staging one."""
 
 import contextlib
 import contextvars
+import hashlib
 import json
 import os
 import shutil
+import stat
 import sys
 import tempfile
 import time
@@ -70,7 +72,7 @@ def check_output_path(out, *, file: bool = False) -> None:
         raise ValueError(f"--out {out!r}: {str(parent)!r} is not writable")
 
 
-_DIRECT: contextvars.ContextVar[tuple[Path, set] | None] = contextvars.ContextVar(
+_DIRECT: contextvars.ContextVar[tuple[Path, set, set, Path] | None] = contextvars.ContextVar(
     "visjax_direct_outputs", default=None
 )
 MANIFEST = ".visjax-outputs.json"  # in an output folder: the entries a command wrote there
@@ -90,6 +92,75 @@ def _read_manifest(path: Path) -> dict | None:
     if not (isinstance(m, dict) and isinstance(m.get("entries"), list)):
         return None
     return m
+
+
+def _plain_name(name) -> bool:
+    """A name a manifest may list: one entry of the output folder itself (not `.`, `..`,
+    a path, or one of visjax's own bookkeeping files)."""
+    return (
+        isinstance(name, str)
+        and name not in ("", ".", "..")
+        and not any(c in name for c in "/\\\0")
+        and not name.startswith((_STAGE_PREFIX, ".visjax-outputs", ".visjax-direct"))
+        and not name.endswith(".lock")
+    )
+
+
+def fingerprint(path) -> str:
+    """A digest of an output entry as it is on disk: for a file its size and modification
+    time (nanoseconds), for a folder those of every file under it with their relative
+    names, for a symbolic link its target (never followed). An entry that the user
+    changed, replaced or made, or that another folder's manifest names, does not match
+    the fingerprint recorded when the command wrote it."""
+    digest = hashlib.sha256()
+
+    def add(p: str, rel: str) -> None:
+        st = os.lstat(p)
+        if stat.S_ISLNK(st.st_mode):
+            digest.update(f"l {rel} {os.readlink(p)}\n".encode("utf-8", "surrogateescape"))
+        elif stat.S_ISDIR(st.st_mode):
+            digest.update(f"d {rel}\n".encode("utf-8", "surrogateescape"))
+            for child in sorted(os.listdir(p)):
+                add(os.path.join(p, child), f"{rel}/{child}")
+        else:
+            line = f"f {rel} {st.st_size} {st.st_mtime_ns} {stat.S_IFMT(st.st_mode)}\n"
+            digest.update(line.encode("utf-8", "surrogateescape"))
+
+    add(str(path), ".")
+    return digest.hexdigest()[:32]
+
+
+def _exists(path: Path) -> bool:
+    return path.exists() or path.is_symlink()
+
+
+def _verified(final: Path, manifest: dict) -> tuple[list[str], list[str]]:
+    """The entries of an earlier run's manifest that are still what that run wrote (a
+    plain name, its recorded fingerprint matching), and those that are not (an entry the
+    manifest cannot vouch for: a path, `..`, no fingerprint, changed since): only the
+    first may be replaced or removed."""
+    prints = manifest.get("fingerprints")
+    prints = prints if isinstance(prints, dict) else {}
+    ours, not_ours = [], []
+    for name in manifest["entries"]:
+        if not _plain_name(name):
+            not_ours.append(str(name))
+        elif not _exists(final / name):
+            continue
+        elif isinstance(prints.get(name), str) and prints[name] == fingerprint(final / name):
+            ours.append(name)
+        else:
+            not_ours.append(name)
+    return ours, not_ours
+
+
+def _read_journal(final: Path) -> set[str]:
+    """The entries visjax wrote straight into `final` in a run that did not finish (a
+    sweep's parts: `written_directly`), from its `.visjax-direct*.json` journals."""
+    names: set[str] = set()
+    for path in final.glob(".visjax-direct*.json"):
+        names |= _read_journal_file(path)
+    return names
 
 
 @contextlib.contextmanager
@@ -139,9 +210,11 @@ def _move(source: Path, destination: Path) -> None:
 
 
 def _remove(path: Path) -> None:
+    """An entry this command wrote (verified by `_verified`): a folder whole, a file or a
+    link itself (a link is never followed)."""
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path)
-    elif path.exists() or path.is_symlink():
+    elif _exists(path):
         path.unlink()
 
 
@@ -159,9 +232,14 @@ def staged_output(
     turned into one) nothing is moved and the staging folder is removed.
 
     The folder is the command's, shared with the user's own files: the command writes only
-    its own entries into it and records them in `.visjax-outputs.json`; it never deletes
-    or replaces an entry it did not write. The same command run again replaces its earlier
-    entries whole (an entry of the earlier run that this one does not write is removed);
+    its own entries into it and records them in `.visjax-outputs.json`, each with its
+    `fingerprint` (sizes and modification times); it never deletes or replaces an entry it
+    did not write. The same command run again replaces its earlier entries whole (an entry
+    of the earlier run that this one does not write is removed), but only those that are
+    plain names of the folder and still match their fingerprints: a manifest copied,
+    edited or left by anyone else names nothing that is removed, and an entry the user
+    changed since is left as it is (a note says so; a new output of that name is then
+    kept aside, as for any entry the command did not write);
     another command's results are refused unless `force`, which replaces them whole. A
     lock (`.visjax.lock`, the kernel's `flock`) refuses a second run into the same folder
     while one is writing. An output file that exists is replaced only with `force`.
@@ -202,7 +280,7 @@ def staged_output(
             # staging folders of a run killed by SIGKILL (the lock says none is running)
             pattern = f"{_STAGE_PREFIX}{final.name}-*" if file else f"{_STAGE_PREFIX}*"
             for stale in [] if slot else folder.glob(pattern):
-                if stale.is_dir():
+                if stale.is_dir() and not stale.is_symlink():
                     shutil.rmtree(stale, ignore_errors=True)
             if file:
                 if final.exists() and not force:
@@ -215,7 +293,7 @@ def staged_output(
                         yield target
                     os.replace(target, final)
                 return
-            earlier = []
+            earlier: list[str] = []  # the earlier run's entries, still as it wrote them
             names = [MANIFEST] + sorted(p.name for p in final.glob(".visjax-outputs-*.json"))
             for name in names:  # the folder's manifest, and those of a job's slices
                 manifest = _read_manifest(final / name)
@@ -226,14 +304,27 @@ def staged_output(
                         f"--out {final} holds the results of `visjax {manifest.get('command')}`"
                         f" (its {name}): --force to replace them, or choose another folder"
                     )
-                earlier += [e for e in manifest["entries"] if isinstance(e, str) and "/" not in e]
+                ours, not_ours = _verified(final, manifest)
+                earlier += ours
+                if not_ours:
+                    shown = ", ".join(repr(n) for n in not_ours[:3])
+                    sys.stderr.write(
+                        f"visjax: note: --out {final}: {name} lists {shown}"
+                        f"{' ...' if len(not_ours) > 3 else ''}, which this command did not "
+                        "write as it is now (changed since, or not a plain name of --out): "
+                        "left as it is\n"
+                    )
                 if slot is None:
                     earlier.append(name)  # replaced whole: the manifest goes too
             record_at = MANIFEST if slot is None else f".visjax-outputs-{slot}.json"
+            journal = final / (
+                ".visjax-direct.json" if slot is None else f".visjax-direct-{slot}.json"
+            )
             special = {record_at, _LOCK}
             direct: set[str] = set()
+            allowed = set(earlier) | _read_journal(final)
             with _staging(final, "") as staging:
-                token = _DIRECT.set((final, direct))
+                token = _DIRECT.set((final, direct, allowed, journal))
                 try:
                     with _renaming(staging, final):
                         yield staging
@@ -241,14 +332,14 @@ def staged_output(
                     _DIRECT.reset(token)
                 produced = sorted(p.name for p in staging.iterdir())
                 owned = set(earlier) | direct
-                clash = [n for n in produced if (final / n).exists() and n not in owned]
+                clash = [n for n in produced if _exists(final / n) and n not in owned]
                 if clash:
                     keep = final / f"visjax-results-{time.strftime('%Y%m%d-%H%M%S')}"
                     os.replace(staging, keep)
                     raise OutputConflictError(
                         f"--out {final}: {clash[0]!r} is not from this command's earlier run "
-                        f"(not in {MANIFEST}); nothing there was replaced, the results are "
-                        f"in {keep}"
+                        f"(not in {MANIFEST}, or changed since); nothing there was replaced, "
+                        f"the results are in {keep}"
                     )
                 for name in [] if slot else earlier:  # the earlier run's: replaced whole
                     if name not in special and name not in direct:
@@ -256,8 +347,14 @@ def staged_output(
                 for name in produced:
                     _move(staging / name, final / name)
             entries = sorted(direct | set(produced))
-            record = {"command": command, "entries": entries, "written_utc": _now()}
+            record = {
+                "command": command,
+                "entries": entries,
+                "fingerprints": {n: fingerprint(final / n) for n in entries if _exists(final / n)},
+                "written_utc": _now(),
+            }
             (final / record_at).write_text(json.dumps(record, indent=1) + "\n")
+            journal.unlink(missing_ok=True)
     except BaseException:
         for path in made:  # folders this call made, still empty: removed again
             with contextlib.suppress(OSError):
@@ -269,17 +366,47 @@ def written_directly(path) -> None:
     """Record that the command writes `path` (an entry of its final output folder, e.g. a
     sweep's parts, written as they finish) straight into the final folder, not into the
     staging one: it is then the command's own in the folder's manifest, and not removed
-    as an earlier run's entry. Outside `staged_output`, or for a path elsewhere, nothing."""
+    as an earlier run's entry. Outside `staged_output`, or for a path elsewhere, nothing.
+
+    **Raises:** `OutputConflictError` when the entry exists and is not the command's own
+    (not in the manifest of its earlier run, changed since, or a symbolic link): visjax
+    never writes into a folder it did not make. The entry is recorded at once (in
+    `.visjax-direct.json`), so that a run that is interrupted and then resumed may write
+    into it again."""
     state = _DIRECT.get()
     if state is None:
         return
-    final, direct = state
+    final, direct, allowed, journal = state
     try:
         relative = Path(path).relative_to(final)
     except ValueError:
         return
-    if relative.parts:
-        direct.add(relative.parts[0])
+    if not relative.parts:
+        return
+    name = relative.parts[0]
+    if name in direct:
+        return
+    entry = final / name
+    if entry.is_symlink() or (_exists(entry) and name not in allowed):
+        raise OutputConflictError(
+            f"--out {final}: {name!r} is not from this command's earlier run (not in "
+            f"{MANIFEST}, changed since{', a symbolic link' if entry.is_symlink() else ''}); "
+            "visjax writes into no folder it did not make: move it away, or choose another "
+            "--out"
+        )
+    direct.add(name)
+    listed = sorted(_read_journal_file(journal) | direct)
+    tmp = journal.with_name(journal.name + ".tmp")
+    tmp.write_text(json.dumps(listed) + "\n")
+    os.replace(tmp, journal)
+
+
+def _read_journal_file(path: Path) -> set[str]:
+    try:
+        listed = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return set()
+    return {n for n in listed if _plain_name(n)} if isinstance(listed, list) else set()
 
 
 def _now() -> str:

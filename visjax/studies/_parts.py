@@ -9,8 +9,10 @@ written to a temporary name and renamed into place, so a part is either whole or
 and the manifest never names a part that is not on disk.
 """
 
+import contextlib
 import json
 import os
+import re
 import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -92,6 +94,11 @@ class Parts:
         already done. **Raises:** `PartsError` for a folder that holds another sweep's
         parts, or any parts without `resume`."""
         path = self.folder / MANIFEST
+        if self.folder.is_symlink() or (self.folder.exists() and not self.folder.is_dir()):
+            raise PartsError(
+                f"{self.folder} is a symbolic link or a file: a sweep writes its parts only "
+                "into a folder of its own; choose another folder"
+            )
         if path.exists():
             old = json.loads(path.read_text())
             if old.get("identity") != self.identity or old.get("chunk") != self.chunk:
@@ -132,6 +139,31 @@ class Parts:
 
     def runs_done(self) -> int:
         return sum(min(self.chunk, self.n_runs - c * self.chunk) for c in self.done)
+
+
+_OWN = re.compile(r"(\.)?(part-\d{7}\.parquet|manifest\.json)(?(1)\..+|)")  # and temporaries
+
+
+def clear_parts(folder) -> None:
+    """Remove a sweep's parts from `folder` (to start over): only what a sweep writes there
+    (its `part-*.parquet`, its `manifest.json` and their temporary files), then the folder
+    itself if it is left empty. Anything else in it stays; a symbolic link is never
+    followed. **Raises:** `PartsError` for a link or a file where the folder should be."""
+    folder = Path(folder)
+    if folder.is_symlink():
+        raise PartsError(
+            f"{folder} is a symbolic link: visjax clears no parts through a link; remove the "
+            "link, or choose another --out"
+        )
+    if not folder.exists():
+        return
+    if not folder.is_dir():
+        raise PartsError(f"{folder} is a file, not a sweep's parts folder")
+    for path in folder.iterdir():
+        if _OWN.fullmatch(path.name) and path.is_file() and not path.is_symlink():
+            path.unlink()
+    with contextlib.suppress(OSError):
+        folder.rmdir()
 
 
 def read_manifest(folder) -> dict:
