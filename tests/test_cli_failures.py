@@ -266,3 +266,32 @@ def test_a_file_with_most_frames_missing_a_feature_is_not_successful(tmp_path, c
     dropped = verbs._dropped("velocity", path)
     assert dropped["fraction"] == 0.75 and dropped["over"]
     assert verbs._dropped("slow-toy", path) is None  # a format of its own: not reported
+
+
+def test_variant_names_never_write_outside_out(tmp_path, capsys):
+    """A registered problem whose variants are named like paths (`a/b`, `/abs`, `..`):
+    each variant's folder is one plain entry inside `--out` (issue 44); two names that
+    map to one folder are refused when the problem is registered."""
+    from tests.studies.slow_toy import slow_toy
+    from visjax.studies import _registry
+
+    name = "pathlike-toy"
+    studies.register_problem(
+        name, lambda *, noise_px=0.1, variant=None: slow_toy(noise_px=noise_px),
+        variants=("a/b", "/abs", "../up"), replace=True,
+    )  # fmt: skip
+    try:
+        out = tmp_path / "parent" / "out"
+        sets = ["--set", "a/b", "--set", "/abs", "--set", "../up"]
+        assert main(["compare", name, *sets, "--seeds", "1", "--quiet", "--out", str(out)]) == 0
+        assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.iterdir()) == ["parent"]
+        assert sorted(p.name for p in (tmp_path / "parent").iterdir()) == ["out"]
+        for folder in ("a_b", "_abs", "___up"):
+            assert (out / folder / "summary.json").exists()
+        assert not (tmp_path / "abs").exists() and not (out / "a").exists()
+        with pytest.raises(ValueError, match="share the output folder 'a_b'"):
+            studies.register_problem(name, slow_toy, variants=("a.b", "a/b"), replace=True)
+        with pytest.raises(ValueError, match="makes no output folder name"):
+            studies.register_problem(name, slow_toy, variants=("..",), replace=True)
+    finally:
+        _registry._REGISTRY.pop(name, None)

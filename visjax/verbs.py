@@ -259,7 +259,9 @@ def check_study(
 def _folder(out, tag):
     if out is None:
         return None
-    return Path(out) if tag is None else Path(out) / tag.replace(".", "_")
+    from .io import output_name
+
+    return Path(out) if tag is None else Path(out) / output_name(tag)
 
 
 def _result(results: dict, settings, seed, started, out):

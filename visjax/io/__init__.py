@@ -35,6 +35,7 @@ from ._outputs import (
 )
 from ._staging import (
     check_output_path as check_output_path,
+    output_name as output_name,
     staged_output as staged_output,
     user_path as user_path,
 )

@@ -8,6 +8,7 @@ import contextvars
 import hashlib
 import json
 import os
+import re
 import shutil
 import stat
 import sys
@@ -70,6 +71,17 @@ def check_output_path(out, *, file: bool = False) -> None:
         parent = parent.parent
     if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"--out {out!r}: {str(parent)!r} is not writable")
+
+
+def output_name(name) -> str:
+    """The entry of an output folder that a name (a problem's, a variant's, a method's)
+    is written under: every character but ASCII letters, digits, `_`, `-`, `+` and `=`
+    becomes `_` (`I.1` is `I_1`; `a/b`, `..` and `/abs` stay one plain entry inside the
+    folder). **Raises:** `ValueError` for a name with none of those characters."""
+    text = re.sub(r"[^A-Za-z0-9_+=-]", "_", str(name))
+    if not text.strip("_"):
+        raise ValueError(f"{name!r} makes no output folder name (no letter or digit)")
+    return text
 
 
 _DIRECT: contextvars.ContextVar[tuple[Path, set, set, Path] | None] = contextvars.ContextVar(

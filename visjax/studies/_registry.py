@@ -16,6 +16,7 @@ import typing
 from collections.abc import Callable, Sequence
 
 from ..estimators import MAX_STEPS
+from ..io import output_name
 from ._problem import AbstractProblem
 
 DEFAULT_RATE_HZ = 1000.0
@@ -151,6 +152,14 @@ def register_problem(
         )
     if not callable(build):
         raise TypeError(f"`build` of problem {name!r} must be callable.")
+    names = {}
+    for v in variants:  # each variant's output folder (`visjax.io.output_name`): one each
+        other = names.setdefault(output_name(v), v)
+        if other != v:
+            raise ValueError(
+                f"problem {name!r}: variants {other!r} and {v!r} would share the output "
+                f"folder {output_name(v)!r}; rename one."
+            )
     taken = name in _REGISTRY or name in _ALIASES
     if taken and not replace:
         raise ValueError(f"a problem named {name!r} is registered already (replace=True).")
