@@ -99,6 +99,68 @@ def test_job_slices_merge_and_their_errors(tmp_path, problem, points, whole):
         studies.merge_parts([folders[0], other])
 
 
+def test_altered_foreign_or_truncated_parts_are_recomputed_or_refused(
+    tmp_path, problem, points, whole
+):
+    """Issue 44: a part copied over another, a part of another sweep with the same chunk
+    index, a part whose values were edited, a truncated part: `resume` recomputes each
+    (the table equals the uninterrupted one, no run counted twice) and `merge_parts`
+    refuses each, naming it; a manifest that is damaged or lacks a key is one error
+    naming the file."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    folder = tmp_path / "parts"
+    studies.sweep(problem, points, jnp.arange(6), chunk=32, parts=folder)
+    other = tmp_path / "other"
+    studies.sweep(problem, points, jnp.arange(1, 7), chunk=32, parts=other)
+    saved = {c: (folder / part_name(c)).read_bytes() for c in range(10)}
+
+    def copied_over():
+        (folder / part_name(2)).write_bytes(saved[1])
+
+    def foreign():
+        (folder / part_name(4)).write_bytes((other / part_name(4)).read_bytes())
+
+    def edited():
+        table = pq.read_table(folder / part_name(6))
+        error = pa.array(np.zeros(table.num_rows))
+        table = table.set_column(table.column_names.index("error"), "error", error)
+        pq.write_table(table, folder / part_name(6))
+
+    def truncated():
+        (folder / part_name(8)).write_bytes(saved[8][: len(saved[8]) // 2])
+
+    for alter, chunk in ((copied_over, 2), (foreign, 4), (edited, 6), (truncated, 8)):
+        alter()
+        with pytest.raises(studies.PartsError, match=part_name(chunk)):
+            studies.merge_parts([folder])
+        lines = []
+        resumed = studies.sweep(
+            problem, points, jnp.arange(6), chunk=32, parts=folder, resume=True, log=lines.append
+        )
+        pd.testing.assert_frame_equal(resumed, whole)
+        assert any(part_name(chunk) in ln and "recomputed" in ln for ln in lines), lines
+        table, _ = studies.merge_parts([folder])
+        pd.testing.assert_frame_equal(table, whole)
+    manifest = folder / "manifest.json"
+    good = manifest.read_text()
+    for text, says in (
+        (good[: len(good) // 2], "not valid JSON"),
+        (json.dumps({k: v for k, v in json.loads(good).items() if k != "identity"}), "'identity'"),
+        (json.dumps({**json.loads(good), "done": ["x"]}), "'done'"),
+    ):
+        manifest.write_text(text)
+        for call in (
+            lambda: studies.merge_parts([folder]),
+            lambda: studies.sweep(
+                problem, points, jnp.arange(6), chunk=32, parts=folder, resume=True
+            ),
+        ):
+            with pytest.raises(studies.PartsError, match=f"manifest.json: .*{says}"):
+                call()
+
+
 def test_memory_estimate_refuses_a_chunk_too_large(problem, points):
     """The memory of one chunk from XLA's analysis; a limit below it is refused before any
     run, naming a chunk that fits."""

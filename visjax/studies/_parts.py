@@ -4,12 +4,17 @@ skips what is done, and the slices of a sweep run on several machines (`--shard 
 merge into one table.
 
 The folder holds `manifest.json` (the sweep's identity, its size and chunking, the shard,
-and the chunks done) and `part-<chunk>.parquet` (the rows of one chunk). Every file is
-written to a temporary name and renamed into place, so a part is either whole or absent,
-and the manifest never names a part that is not on disk.
+the chunks done and each part's SHA-256) and `part-<chunk>.parquet` (the rows of one chunk,
+its Parquet metadata naming the sweep's identity, the chunk and its run range). Every file
+is written to a temporary name and renamed into place, so a part is either whole or absent,
+and the manifest never names a part that is not on disk. A part is used only when it is
+verified (`verify_part`): its checksum the manifest's, its metadata this sweep's and this
+chunk's, its runs exactly the chunk's; a resumed sweep recomputes any other, `merge_parts`
+refuses it, naming it.
 """
 
 import contextlib
+import hashlib
 import json
 import os
 import re
@@ -18,7 +23,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 MANIFEST = "manifest.json"
-_VERSION = 1
+_VERSION = 2  # 2: each part's checksum in the manifest, its identity in its metadata
+_META = b"visjax.part"  # a part's Parquet key-value metadata: identity, chunk, runs
 
 
 class PartsError(ValueError):
@@ -65,6 +71,7 @@ class Parts:
         self.shard = None if shard is None else (int(shard[0]), int(shard[1]))
         self.info = dict(info or {})
         self.done: set[int] = set()
+        self.checksums: dict[int, str] = {}
 
     @property
     def n_chunks(self) -> int:
@@ -86,49 +93,72 @@ class Parts:
             "n_chunks": self.n_chunks,
             "shard": None if self.shard is None else list(self.shard),
             "done": sorted(self.done),
+            "checksums": {str(c): self.checksums[c] for c in sorted(self.done)},
             "info": self.info,
         }
 
-    def open(self, *, resume: bool) -> set[int]:
+    def open(self, *, resume: bool, log=None) -> set[int]:
         """Create the folder, or reopen it with `resume=True`. **Returns:** the chunks
-        already done. **Raises:** `PartsError` for a folder that holds another sweep's
-        parts, or any parts without `resume`."""
+        already done, each verified (`verify_part`): a part that is truncated, altered
+        since it was written, or another sweep's is left out (recomputed by the sweep;
+        `log` says which and why). **Raises:** `PartsError` for a folder that holds another
+        sweep's parts, any parts without `resume`, or a manifest that cannot be read."""
         path = self.folder / MANIFEST
+        self.checksums: dict[int, str] = {}
         if self.folder.is_symlink() or (self.folder.exists() and not self.folder.is_dir()):
             raise PartsError(
                 f"{self.folder} is a symbolic link or a file: a sweep writes its parts only "
                 "into a folder of its own; choose another folder"
             )
         if path.exists():
-            old = json.loads(path.read_text())
-            if old.get("identity") != self.identity or old.get("chunk") != self.chunk:
+            old = read_manifest(self.folder)
+            if old["identity"] != self.identity or old["chunk"] != self.chunk:
                 raise PartsError(
                     f"{self.folder} holds the parts of a different sweep (other parameter "
                     "points, seeds, problem or chunk size); choose another folder, or remove "
                     "it (`--force` on the command line) to start over."
                 )
-            if (old.get("shard") or None) != (None if self.shard is None else list(self.shard)):
+            if old["shard"] != (None if self.shard is None else list(self.shard)):
                 raise PartsError(
-                    f"{self.folder} holds the parts of shard {old.get('shard')}, not {self.shard}."
+                    f"{self.folder} holds the parts of shard {old['shard']}, not {self.shard}."
                 )
-            done = {c for c in old.get("done", []) if (self.folder / part_name(c)).exists()}
-            if done and not resume:
+            listed = [c for c in old["done"] if (self.folder / part_name(c)).exists()]
+            if listed and not resume:
                 raise PartsError(
-                    f"{self.folder} already holds {len(done)} finished chunk(s) of this "
+                    f"{self.folder} already holds {len(listed)} finished chunk(s) of this "
                     "sweep: resume it (`resume=True`, `--resume`) or remove it (`--force`) to "
                     "start over."
                 )
-            self.done = done if resume else set()
+            done = set()
+            for c in listed if resume else ():
+                problem = verify_part(self.folder, old, c)
+                if problem is None:
+                    done.add(c)
+                    self.checksums[c] = old["checksums"][str(c)]
+                elif log is not None:
+                    log(f"{self.folder / part_name(c)}: {problem}; recomputed")
+            self.done = done
         else:
             self.folder.mkdir(parents=True, exist_ok=True)
         write_json(path, self._manifest())
         return set(self.done)
 
     def write(self, chunk: int, frame) -> None:
-        """Write chunk `chunk`'s rows (a DataFrame) as its part, then mark it done."""
-        _atomic_write(
-            self.folder / part_name(chunk), lambda tmp: frame.to_parquet(tmp, index=False)
+        """Write chunk `chunk`'s rows (a DataFrame) as its part (its metadata naming the
+        sweep, the chunk and its runs), then mark it done with its checksum."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        first = int(chunk) * self.chunk
+        runs = [first, min(first + self.chunk, self.n_runs) - 1]
+        table = pa.Table.from_pandas(frame, preserve_index=False)
+        meta = {"identity": self.identity, "chunk": int(chunk), "runs": runs}
+        table = table.replace_schema_metadata(
+            {**(table.schema.metadata or {}), _META: json.dumps(meta).encode()}
         )
+        path = self.folder / part_name(chunk)
+        _atomic_write(path, lambda tmp: pq.write_table(table, tmp))
+        self.checksums[int(chunk)] = _sha256(path)
         self.done.add(int(chunk))
         write_json(self.folder / MANIFEST, self._manifest())
 
@@ -166,11 +196,91 @@ def clear_parts(folder) -> None:
         folder.rmdir()
 
 
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
 def read_manifest(folder) -> dict:
+    """A parts folder's manifest, checked: every key a sweep writes, of its type.
+    **Raises:** `PartsError` naming the file and what is wrong (missing, not JSON, a key
+    missing or of the wrong type), and what to do."""
     path = Path(folder) / MANIFEST
     if not path.exists():
         raise PartsError(f"{folder}: no {MANIFEST} (not a sweep's parts folder).")
-    return json.loads(path.read_text())
+    fix = f"delete {folder} (or run the sweep with --force) to start over"
+    try:
+        m = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as e:
+        raise PartsError(f"{path}: cannot be read ({e}); {fix}.") from None
+    except ValueError as e:
+        raise PartsError(f"{path}: not valid JSON ({e}); {fix}.") from None
+    if not isinstance(m, dict):
+        raise PartsError(f"{path}: not a sweep's manifest (a JSON object); {fix}.")
+    if m.get("version") == 1:
+        m.setdefault("checksums", None)  # written before parts carried checksums
+    kinds = {
+        "identity": lambda x: isinstance(x, str),
+        "n_runs": lambda x: _int(x) and x >= 0,
+        "chunk": lambda x: _int(x) and x >= 1,
+        "n_chunks": lambda x: _int(x) and x >= 0,
+        "shard": lambda x: x is None or (isinstance(x, list) and len(x) == 2),
+        "done": lambda x: isinstance(x, list) and all(_int(c) and c >= 0 for c in x),
+        "checksums": lambda x: x is None or isinstance(x, dict),
+    }
+    for key, ok in kinds.items():
+        if key not in m:
+            raise PartsError(f"{path}: no {key!r} (not a sweep's manifest, or damaged); {fix}.")
+        if not ok(m[key]):
+            raise PartsError(f"{path}: {key!r} is {m[key]!r}, not a sweep's value; {fix}.")
+    if m["n_chunks"] != -(-m["n_runs"] // m["chunk"]) or any(c >= m["n_chunks"] for c in m["done"]):
+        raise PartsError(f"{path}: its chunks do not add up to its runs (edited?); {fix}.")
+    m.setdefault("info", {})
+    return m
+
+
+def verify_part(folder, manifest: dict, chunk: int) -> str | None:
+    """Whether `folder`'s part of chunk `chunk` is the one its sweep wrote. **Returns:**
+    `None` for a verified part; otherwise why not: missing, its SHA-256 not the manifest's
+    (truncated, edited, or another part copied over it), unreadable, its metadata another
+    sweep's or another chunk's, or its runs not exactly the chunk's."""
+    import pyarrow.parquet as pq
+
+    path = Path(folder) / part_name(chunk)
+    if not path.is_file():
+        return "missing"
+    recorded = (manifest.get("checksums") or {}).get(str(chunk))
+    if recorded is None:
+        return "no checksum in the manifest (written by an older visjax)"
+    if _sha256(path) != recorded:
+        return "its checksum differs from the manifest's (truncated, altered or replaced)"
+    try:
+        table = pq.read_table(path)
+    except Exception as e:  # pyarrow's own errors: a damaged file
+        return f"not a readable Parquet part ({type(e).__name__})"
+    try:
+        meta = json.loads((table.schema.metadata or {})[_META])
+    except (KeyError, ValueError):
+        return "no sweep metadata (not a part a sweep wrote)"
+    first = chunk * manifest["chunk"]
+    runs = [first, min(first + manifest["chunk"], manifest["n_runs"]) - 1]
+    if meta.get("identity") != manifest["identity"]:
+        return "the part of another sweep"
+    if meta.get("chunk") != chunk or meta.get("runs") != runs:
+        return f"the part of chunk {meta.get('chunk')}, not {chunk}"
+    if "run" not in table.column_names:
+        return "no run column"
+    values = table.column("run").to_pylist()
+    if values != list(range(runs[0], runs[1] + 1)):
+        return f"its rows are not runs {runs[0]} to {runs[1]}"
+    return None
 
 
 def find_parts(paths: Iterable) -> list[Path]:
@@ -213,6 +323,12 @@ def merge_parts(folders: Sequence) -> tuple:
         for c in m["done"]:
             if not (Path(f) / part_name(c)).exists():
                 continue
+            problem = verify_part(f, m, c)
+            if problem is not None:
+                raise PartsError(
+                    f"{Path(f) / part_name(c)}: {problem}: resume the sweep that wrote it "
+                    "(--resume, which recomputes it) or delete the part, then merge again."
+                )
             if c in owner:
                 raise PartsError(
                     f"chunk {c} (runs {c * first['chunk']} to "

@@ -282,7 +282,7 @@ def sweep(
         identity = _identity(identity_source or _qualname(factory), leaves, key_data, chunk)
         info.update(n_points=int(n_points), n_seeds=int(n_seeds))
         store = Parts(parts, identity, n_runs, chunk, shard=shard, info=info)
-        done = store.open(resume=resume)
+        done = store.open(resume=resume, log=log)
     elif resume:
         raise ValueError("`resume=True` needs the `parts` folder of the sweep to resume.")
 
