@@ -5,6 +5,7 @@ before any work (exit 2), and a data file with most frames missing a feature say
 
 import json
 import re
+import sys
 import time
 
 import equinox as eqx
@@ -295,3 +296,64 @@ def test_variant_names_never_write_outside_out(tmp_path, capsys):
             studies.register_problem(name, slow_toy, variants=("..",), replace=True)
     finally:
         _registry._REGISTRY.pop(name, None)
+
+
+@pytest.mark.parametrize(
+    "source, code, says",
+    [
+        (None, 2, "no module named 'nosuch_mod_44' in the current folder"),
+        ("def broken(:\n", 1, "your module raised SyntaxError"),
+        ("raise RuntimeError('my module is broken')\n", 1, "raised RuntimeError: my module is"),
+        (
+            "from visjax import studies\n"
+            "def build(*, noise_px=0.1):\n    return 1 / 0\n"
+            "studies.register_problem('zero-toy', build, replace=True)\n",
+            1,
+            "its builder nosuch_mod_44.build raised ZeroDivisionError",
+        ),
+    ],
+)
+def test_import_failures_say_so_in_one_line(tmp_path, monkeypatch, capsys, source, code, says):
+    """`--import MODULE` (issue 44): a module in the current folder is found; one that is
+    not found is one line (exit 2); one that does not parse, raises on import, or whose
+    builder raises is one line naming it, then the user's own traceback (their code)."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", ".")])
+    monkeypatch.delitem(sys.modules, "nosuch_mod_44", raising=False)
+    if source is not None:
+        (tmp_path / "nosuch_mod_44.py").write_text(source)
+    try:
+        status = main(["--import", "nosuch_mod_44", "run", "zero-toy", "--quiet"])
+    except SystemExit as e:  # refused while parsing
+        status = e.code
+    assert status == code
+    err = capsys.readouterr().err
+    first, *rest = err.splitlines()
+    assert first.startswith("visjax: error: ") and says in first, err
+    if code == 2:
+        assert rest == []
+    else:
+        assert first.endswith("(your code's traceback below)")
+        assert rest[0] == "Traceback (most recent call last):"
+        assert "nosuch_mod_44.py" in err and "visjax/cli.py" not in err
+    sys.modules.pop("nosuch_mod_44", None)
+
+
+def test_a_broken_plugin_breaks_no_other_command(monkeypatch, capsys):
+    """An installed entry point (`visjax.problems`) that raises on import is loaded only
+    when named: every other command works (the parser lists it); naming it is one line."""
+    from visjax.studies import _registry
+
+    class Broken:
+        name, value = "broken-plugin", "some_pkg.problems:build"
+
+        def load(self):
+            raise ImportError("No module named 'some_dependency'")
+
+    monkeypatch.setitem(_registry._PENDING, "broken-plugin", Broken())
+    assert "broken-plugin" in studies.problem_names()
+    assert studies.registered("velocity").name == "velocity"
+    err = _refused(["run", "broken-plugin", "--quiet"], capsys)
+    assert "Traceback" not in err
+    assert "'some_pkg.problems:build'" in err and "failed to load: ImportError" in err
+    _registry._BROKEN.pop("broken-plugin", None)

@@ -297,10 +297,13 @@ def _check(a) -> None:
                 "--seeds above 1 needs --noise above 0: noise-free runs are all the same"
             )
     if a.command in VERBS:
-        from .studies import registered
+        from .studies import load_module, registered
 
         for module in a.modules or ():
-            importlib.import_module(module)
+            try:  # a module that raises on import: `UserCodeError`, with its traceback
+                load_module(module)
+            except ValueError as e:  # not found, not a module's name: one line
+                raise argparse.ArgumentTypeError(str(e)) from None
         try:  # the problem's name, options and variants, before any work
             registered(a.problem).check(
                 a.data, a.duration, a.rate, a.set, a.robust, getattr(a, "method", None)
@@ -359,6 +362,7 @@ def main(argv=None) -> int:
     from .io import DataFormatError, staged_output
     from .io._staging import OutputConflictError
     from .report import RunFailed
+    from .studies import UserCodeError
 
     failed = None
     try:
@@ -382,6 +386,10 @@ def main(argv=None) -> int:
     except (DataFormatError, OutputConflictError) as e:  # a bad file, an --out in use: usage
         sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
         return 2
+    except UserCodeError as e:  # the user's own module or builder: their traceback helps
+        sys.stderr.write(f"visjax: error: {_one_line(e)} (your code's traceback below)\n")
+        sys.stderr.write(_user_traceback(e.__cause__))
+        return 1
     except ValueError as e:
         from .verbs import Refused  # a study too large for this machine, found as it starts
 
@@ -450,6 +458,25 @@ def _terminated_as_interrupt():
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
+
+
+def _user_traceback(error) -> str:
+    """The traceback of an error raised in a user's code, from its first frame outside
+    visjax and the import machinery (empty for none)."""
+    import traceback
+
+    if error is None:
+        return ""
+    package = str(Path(__file__).resolve().parent)
+    frames = traceback.extract_tb(error.__traceback__)
+    ours = ("<frozen importlib", "importlib/__init__.py", package)
+    while frames and any(
+        str(frames[0].filename).startswith(o) or o in frames[0].filename for o in ours
+    ):
+        frames = frames[1:]
+    body = "".join(traceback.format_list(frames))
+    last = "".join(traceback.format_exception_only(type(error), error))
+    return "Traceback (most recent call last):\n" + body + last
 
 
 def _one_line(error: Exception) -> str:

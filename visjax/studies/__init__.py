@@ -26,6 +26,8 @@ from ._problem import (
     solution as solution,
 )
 from ._registry import (
+    UserCodeError as UserCodeError,
+    load_module as load_module,
     problem as problem,
     problem_names as problem_names,
     register_problem as register_problem,

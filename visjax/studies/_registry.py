@@ -9,8 +9,12 @@ command line: a module named with `visjax --import MODULE`, or an entry point of
 
 import dataclasses
 import difflib
+import importlib
+import importlib.util
 import inspect
+import os
 import re
+import sys
 import types
 import typing
 from collections.abc import Callable, Sequence
@@ -112,13 +116,64 @@ class Registered:
             if bad:
                 flags = ", ".join("--" + b.removesuffix("_px").removesuffix("_hz") for b in bad)
                 raise ValueError(f"problem {self.name!r} takes no {flags}")
-        problem = self.build(**given)
+        try:
+            problem = self.build(**given)
+        except ValueError:  # the builder's own refusal of an option or a data file
+            raise
+        except Exception as e:
+            raise UserCodeError(
+                f"problem {self.name!r}: its builder {_where(self.build)} raised "
+                f"{type(e).__name__}: {_first_line(e)}"
+            ) from e
         if not isinstance(problem, AbstractProblem):
-            raise TypeError(
-                f"the builder of problem {self.name!r} returned {type(problem).__name__}, "
-                "not a visjax.studies.AbstractProblem."
+            raise UserCodeError(
+                f"the builder of problem {self.name!r} ({_where(self.build)}) returned "
+                f"{type(problem).__name__}, not a visjax.studies.AbstractProblem."
             )
         return problem
+
+
+class UserCodeError(Exception):
+    """An error raised by code that registers or builds a problem (a module given to
+    `--import`, a plugin, a problem's builder): the message names the code and the error
+    in one line; the original error, with its traceback, is the `__cause__`."""
+
+
+def _where(f) -> str:
+    f = getattr(f, "__wrapped__", f)
+    return f"{getattr(f, '__module__', '?')}.{getattr(f, '__qualname__', type(f).__name__)}"
+
+
+def load_module(name: str):
+    """Import a user's module that registers problems (the command line's `--import`), as
+    `python -m` would find it: the current folder first, then `sys.path`. **Returns:**
+    the module. **Raises:** `ValueError` for a module that is not found (one line);
+    `UserCodeError` for one that does not parse or raises on import (its error and
+    traceback the cause)."""
+    if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*", name):
+        raise ValueError(f"--import {name!r}: not a module name (e.g. my_problems, pkg.mod)")
+    here = os.getcwd()
+    if here not in sys.path and "" not in sys.path:
+        sys.path.insert(0, here)
+    try:
+        found = importlib.util.find_spec(name)
+    except ModuleNotFoundError:  # a parent package missing
+        found = None
+    except Exception as e:  # a parent package that raises on import
+        raise UserCodeError(
+            f"--import {name}: your module raised {type(e).__name__}: {_first_line(e)}"
+        ) from e
+    if found is None:
+        raise ValueError(
+            f"--import {name}: no module named {name!r} in the current folder ({here}) or "
+            "on sys.path"
+        )
+    try:
+        return importlib.import_module(name)
+    except Exception as e:
+        raise UserCodeError(
+            f"--import {name}: your module raised {type(e).__name__}: {_first_line(e)}"
+        ) from e
 
 
 _REGISTRY: dict[str, Registered] = {}
@@ -170,35 +225,69 @@ def register_problem(
     return entry
 
 
+_PENDING: dict = {}  # installed entry points, not loaded yet (loaded when named)
+_BROKEN: dict[str, str] = {}  # entry points that failed to load: why
+
+
 def _load() -> None:
-    """The installed packages' entry points, once. (The papers' problems are registered
-    by `visjax.papers`, which `import visjax` imports: every import of `visjax.studies`
-    has run it already; `studies` never imports the layer above it.)"""
+    """The installed packages' entry points (group `visjax.problems`), listed once and
+    loaded only when their problem is named: a plugin that fails to import breaks no
+    other command (`--help` and `--version` included), and naming it says why in one
+    line. (The papers' problems are registered by `visjax.papers`, which `import visjax`
+    imports: every import of `visjax.studies` has run it already; `studies` never imports
+    the layer above it.)"""
     global _LOADED
     if _LOADED:
         return
     _LOADED = True
     from importlib.metadata import entry_points
 
-    for ep in entry_points(group="visjax.problems"):
-        if ep.name not in _REGISTRY:
-            register_problem(ep.name, ep.load())
+    try:
+        found = list(entry_points(group="visjax.problems"))
+    except Exception:  # a damaged installation's metadata: no plugins, the rest works
+        found = []
+    for ep in found:
+        if ep.name not in _REGISTRY and ep.name not in _ALIASES:
+            _PENDING.setdefault(ep.name, ep)
+
+
+def _resolve(name: str) -> None:
+    """Load the entry point of `name`, if it is one not loaded yet (a failure recorded in
+    `_BROKEN`, never raised here)."""
+    ep = _PENDING.pop(name, None)
+    if ep is None:
+        return
+    try:
+        register_problem(ep.name, ep.load())
+    except Exception as e:
+        _BROKEN[name] = (
+            f"problem {name!r}: the installed plugin {ep.value!r} (entry point of "
+            f"visjax.problems) failed to load: {type(e).__name__}: {_first_line(e)}"
+        )
+
+
+def _first_line(error: Exception) -> str:
+    lines = [ln.strip() for ln in str(error).splitlines() if ln.strip()]
+    return lines[0] if lines else ""
 
 
 def registered(name: str) -> Registered:
     """The registry entry of `name` (or of an alias). **Raises:** `ValueError` listing the
-    registered names."""
+    registered names, or saying why an installed plugin of that name failed to load."""
     _load()
     name = _ALIASES.get(name, name)
+    _resolve(name)
+    if name in _BROKEN:
+        raise ValueError(_BROKEN[name])
     if name not in _REGISTRY:
         raise ValueError(f"unknown problem {name!r}; choose from {problem_names()}")
     return _REGISTRY[name]
 
 
 def problem_names() -> list[str]:
-    """The registered problems' names."""
+    """The registered problems' names (with the installed plugins', loaded or not)."""
     _load()
-    return sorted(_REGISTRY)
+    return sorted({*_REGISTRY, *_PENDING, *_BROKEN})
 
 
 def problem(name: str, **options) -> AbstractProblem:
