@@ -357,3 +357,20 @@ def test_a_broken_plugin_breaks_no_other_command(monkeypatch, capsys):
     assert "Traceback" not in err
     assert "'some_pkg.problems:build'" in err and "failed to load: ImportError" in err
     _registry._BROKEN.pop("broken-plugin", None)
+
+
+def test_ray_address_with_nothing_listening_is_one_line(capsys):
+    """`--ray ADDRESS` where nothing listens (a closed port on 127.0.0.1; tests contact no
+    other address): one line naming the address and the wait, quickly (issue 44)."""
+    import socket
+
+    pytest.importorskip("ray")
+    with socket.socket() as s:  # a port that was free a moment ago: closed now
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    started = time.perf_counter()
+    argv = [*TOY, "sweep", "slow-toy", "--seeds", "1", "--quiet", "--ray", f"127.0.0.1:{port}"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--ray 127.0.0.1:{port}: nothing answers" in err, err
+    assert time.perf_counter() - started < 30

@@ -49,7 +49,8 @@ _positive = _number(float, lambda v: v > 0, "a positive number")
 _nonnegative = _number(float, lambda v: v >= 0, "a non-negative number")
 _count = _number(int, lambda v: v >= 1, "a positive integer")
 _points = _number(int, lambda v: v >= 4, "an integer of at least 4")
-_seed = _number(int, lambda v: v >= 0, "a non-negative integer")
+MAX_SEED = 2**31 - 1  # the largest seed every JAX mode (int32 without x64) holds exactly
+_seed = _number(int, lambda v: 0 <= v <= MAX_SEED, f"an integer from 0 to {MAX_SEED}")
 
 
 def _shard(text: str):
@@ -286,6 +287,14 @@ def _check(a) -> None:
             raise argparse.ArgumentTypeError(
                 f"--duration {a.duration:g} s makes {samples:.3g} samples, more than a run "
                 f"takes ({MAX_STEPS:.0e}, visjax.estimators.MAX_STEPS)"
+            )
+    seed = getattr(a, "seed", None)
+    if seed is not None:  # the seeds a command draws: --seeds, then as many held out
+        last = seed + getattr(a, "seeds", 1) * (2 if a.command in ("sweep", "tune") else 1) - 1
+        if last > MAX_SEED:
+            raise argparse.ArgumentTypeError(
+                f"--seed {seed} draws seeds up to {last}, past {MAX_SEED} (2^31 - 1, the "
+                "largest seed every JAX mode holds exactly): give a smaller --seed"
             )
     if a.command in ("velocity", "moving_point", "static_points") and a.seeds > 1:
         if a.data is not None:

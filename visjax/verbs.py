@@ -786,7 +786,7 @@ def sweep_command(
     if ray is not None and ray is not False:
         try:
             executor = studies.RayExecutor(address=None if ray in (True, "local") else ray)
-        except ImportError as e:
+        except (ImportError, ConnectionError) as e:
             raise ValueError(str(e)) from None
     try:
         return _sweeps(

@@ -156,6 +156,12 @@ def test_a_fast_log_in_milliseconds_needs_its_unit_declared(tmp_path):
     stamps = 1_717_000_000_000_000_000 + np.arange(40, dtype=np.int64) * 33_333_333
     ros = VelocityData.load(_saved(tmp_path, data, t=stamps, time_unit=np.asarray("ns")))
     np.testing.assert_allclose(ros.t, np.arange(40) * 0.033333333, rtol=1e-12)
+    # uint64 nanoseconds near the type's limit: counted from the first, exactly
+    top = np.iinfo(np.uint64).max - np.arange(40, dtype=np.uint64)[::-1] * np.uint64(33_333_333)
+    near = VelocityData.load(_saved(tmp_path, data, t=top, time_unit=np.asarray("ns")))
+    np.testing.assert_allclose(near.t, np.arange(40) * 0.033333333, rtol=1e-12)
+    wide = np.array([0, 2**63 + 10] + [2**63 + 11 + i for i in range(38)], dtype=np.uint64)
+    _refused(_saved(tmp_path, data, t=wide, time_unit=np.asarray("ns")), VelocityData, "`t`")
     # a structure file converts both of its clocks
     st = _structure()
     path = _saved(

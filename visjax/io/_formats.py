@@ -398,8 +398,17 @@ def _declared_unit(path, arrays: dict) -> bool:
         origin = min(int(arrays[k].min()) for k in keys)
     for key in keys:
         v = arrays[key]
-        if origin:
-            v = v.astype(np.int64) - np.int64(origin)
+        if origin:  # exactly, whatever the integer type (uint64 near its limit too)
+            span = int(v.max()) - origin
+            if span > np.iinfo(np.int64).max:
+                raise DataFormatError(
+                    f"{path}: `{key}` spans {span} {unit} (more than 2^63): not one "
+                    "recording's clock"
+                )
+            if v.dtype.kind == "u":
+                v = (v - v.dtype.type(origin)).astype(np.int64)
+            else:
+                v = v.astype(np.int64) - np.int64(origin)
         arrays[key] = np.asarray(v, np.float64) * factor
     arrays["time_unit"] = "s"
     return True

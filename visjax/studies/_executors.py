@@ -16,7 +16,12 @@ class RayExecutor:
     machine belongs to), or `None` for a local Ray instance started here (and stopped by
     `shutdown`); `num_cpus`: the local instance's CPUs (default: all); `max_retries`: the
     retries of a task whose worker died; `cpus_per_task`: the CPUs a chunk reserves (JAX
-    uses the cores it is given; 1 runs one chunk per CPU).
+    uses the cores it is given; 1 runs one chunk per CPU); `connect_timeout_s`: how long
+    a cluster's address (`host:port`, `ray://host:port`) may take to answer a TCP
+    connection before it is refused (default 10 s).
+
+    **Raises:** `ConnectionError` (one line: the address, the wait) when nothing answers at
+    the address, or Ray cannot connect to it.
 
     Ray is an optional dependency (`pip install visjax[ray]`), imported when an executor is
     made. The problem and the parameter points are sent once (`ray.put`); the workers
@@ -30,6 +35,7 @@ class RayExecutor:
         num_cpus: int | None = None,
         max_retries: int = 3,
         cpus_per_task: float = 1.0,
+        connect_timeout_s: float = 10.0,
     ):
         try:
             import ray
@@ -64,7 +70,14 @@ class RayExecutor:
                 ray.init(**kwargs)
                 self.started_here = True
             else:
-                ray.init(address=address, **kwargs)
+                _reachable(address, float(connect_timeout_s))
+                try:
+                    ray.init(address=address, **kwargs)
+                except (ConnectionError, RuntimeError, ValueError) as e:
+                    first = next((ln for ln in str(e).splitlines() if ln.strip()), "")
+                    raise ConnectionError(
+                        f"--ray {address}: Ray could not connect ({type(e).__name__}: {first})"
+                    ) from None
 
     def map_chunks(self, task, todo: Sequence) -> Iterator[tuple[int, Any]]:
         """Run `task(idx)` for every `(chunk, idx)` of `todo` on the cluster; yield
@@ -97,3 +110,25 @@ class RayExecutor:
 def _run_task(task, idx):
     """A chunk on a Ray worker (whose 64-bit mode is the caller's, from its environment)."""
     return task(idx)
+
+
+def _reachable(address: str, timeout_s: float) -> None:
+    """A cluster's `host:port` (or `ray://host:port`) answers a TCP connection within
+    `timeout_s`; other forms (`"auto"`) are left to Ray. **Raises:** `ConnectionError`."""
+    import socket
+
+    text = address.split("://", 1)[-1]
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit():
+        return
+    host = host.strip("[]") or "127.0.0.1"
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            pass
+    except OSError as e:
+        reason = "no answer" if isinstance(e, TimeoutError) else (e.strerror or str(e))
+        raise ConnectionError(
+            f"--ray {address}: nothing answers at {host}:{port} within {timeout_s:g} s "
+            f"({reason}): start the cluster's head there (`ray start --head`), or run "
+            "--ray without an address for a local instance"
+        ) from None
