@@ -26,7 +26,7 @@ from visjax.sim import random_planar_scenes  # noqa: E402
 
 
 def per_frame(p_ref, p_cur, A):
-    G = find_homography(p_ref, p_cur)
+    G = find_homography(p_ref, p_cur).G
     return G, decompose_homography(G, A)
 
 

@@ -12,6 +12,7 @@ from visjax.geometry import (
     camera_matrix_lstsq,
     euclidean_reconstruction,
     feature_in_camera,
+    find_homography,
     intrinsic_matrix,
     intrinsics_eq4,
     known_feature_regressors,
@@ -119,17 +120,15 @@ def test_shapes_that_were_accepted_silently(no_jaxtyping):
 def test_g33_zero_is_named_and_large_pixels_are_not():
     """A homography whose g33 is 0 (the image origin maps to infinity) gets `g33_zero`; a
     pure translation of pixels near 4e5 does not (judged at the data's scale)."""
-    from visjax.geometry._homography import _find_homography_checked
-
     G0 = np.array([[2.0, 0.1, 5.0], [0.2, 1.0, 3.0], [1e-3, 2e-3, 0.0]])
     p_ref = np.array([[100.0, 50.0], [300.0, 60.0], [320.0, 240.0], [90.0, 250.0]])
     h = np.c_[p_ref, np.ones(4)] @ G0.T
-    G, result = _find_homography_checked(p_ref, h[:, :2] / h[:, 2:])
-    assert result == RESULTS.g33_zero and np.all(np.isnan(G))
+    out = find_homography(p_ref, h[:, :2] / h[:, 2:], throw=False)
+    assert out.result == RESULTS.g33_zero and np.all(np.isnan(out.G))
     big = 4e5 + p_ref
-    G, result = _find_homography_checked(big, big + np.array([5.0, -3.0]))
-    assert result == RESULTS.successful
-    np.testing.assert_allclose(G[:2, 2], [5.0, -3.0], rtol=1e-6)
+    out = find_homography(big, big + np.array([5.0, -3.0]), throw=False)
+    assert out.result == RESULTS.successful
+    np.testing.assert_allclose(out.G[:2, 2], [5.0, -3.0], rtol=1e-6)
 
 
 def test_what_users_catch_outside_and_inside_jit():

@@ -1,21 +1,28 @@
 import cv2
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from tests.helpers import central_difference
-from visjax import RESULTS
+from visjax import RESULTS, result_names
 from visjax.geometry import (
+    Homography,
     alpha_g33,
     euclidean_homography,
     find_homography,
     projective_homography,
 )
-from visjax.geometry._homography import _find_homography_checked
 from visjax.sim import random_planar_scenes
 
+
+def _G(p_ref, p_cur):
+    return find_homography(p_ref, p_cur).G
+
+
 find_j = jax.jit(find_homography)
-find_batch = jax.jit(jax.vmap(find_homography))
+find_batch = jax.jit(jax.vmap(_G))
+find_batch_unchecked = jax.jit(jax.vmap(lambda a, b: find_homography(a, b, throw=False)))
 
 
 @pytest.fixture(scope="module")
@@ -74,13 +81,13 @@ def test_vmap_equals_loop_and_jit(scenes8):
     G = find_batch(scenes8.p_ref[:5], scenes8.p_cur[:5])
     for i in range(5):
         np.testing.assert_allclose(
-            G[i], find_homography(scenes8.p_ref[i], scenes8.p_cur[i]), rtol=1e-11, atol=1e-13
+            G[i], find_homography(scenes8.p_ref[i], scenes8.p_cur[i]).G, rtol=1e-11, atol=1e-13
         )
 
 
 def test_gradient_matches_finite_differences(scenes8):
     p_ref, p_cur = scenes8.p_ref[0], scenes8.p_cur[0]
-    f = lambda pc: find_homography(p_ref, pc)  # noqa: E731
+    f = lambda pc: find_homography(p_ref, pc).G  # noqa: E731
     J = jax.jit(jax.jacrev(f))(p_cur)
     np.testing.assert_allclose(J, central_difference(f, p_cur, 1e-4), atol=1e-9)
     np.testing.assert_allclose(jax.jit(jax.jacfwd(f))(p_cur), J, atol=1e-13)
@@ -90,17 +97,17 @@ def test_gradient_at_symmetric_square_target():
     """The paper's noise-free four-corner target: singular values of the DLT repeat."""
     p_ref = np.array([[200.0, 200.0], [300.0, 200.0], [300.0, 300.0], [200.0, 300.0]])
     # each derivative compiled once, evaluated at the three points
-    for f in (find_homography, _find_homography_of_current):
+    for f in (_G, _find_homography_of_current):
         jac = jax.jit(jax.jacrev(f))
         for p_cur in (p_ref, p_ref + np.array([10.0, -5.0]), p_ref * 1.1 + 3.0):
-            x, other = (p_ref, p_cur) if f is find_homography else (p_cur, p_ref)
+            x, other = (p_ref, p_cur) if f is _G else (p_cur, p_ref)
             J = jac(x, other)
             assert np.all(np.isfinite(J))
             np.testing.assert_allclose(J, central_difference(f, x, 1e-4, other), atol=1e-9)
 
 
 def _find_homography_of_current(p_cur, p_ref):
-    return find_homography(p_ref, p_cur)
+    return find_homography(p_ref, p_cur).G
 
 
 def test_collinear_coincident_and_nonfinite_points():
@@ -121,10 +128,63 @@ def test_collinear_coincident_and_nonfinite_points():
     bad[1, 0] = np.nan
     with pytest.raises(RuntimeError, match="not finite"):
         find_j(p_ref, bad)
-    G, result = _find_homography_checked(p_ref, bad)
-    assert result == RESULTS.nonfinite_pixels and np.all(np.isnan(G))
-    G, result = _find_homography_checked(collinear, p_cur)
-    assert result == RESULTS.degenerate_points and np.all(np.isnan(G))
+    out = find_homography(p_ref, bad, throw=False)
+    assert out.result == RESULTS.nonfinite_pixels and np.all(np.isnan(out.G))
+    out = find_homography(collinear, p_cur, throw=False)
+    assert out.result == RESULTS.degenerate_points and np.all(np.isnan(out.G))
+
+
+@pytest.mark.parametrize("bad", ["collinear", "nan"])
+def test_a_batch_survives_one_degenerate_frame(scenes4, bad):
+    """`throw=False` under `vmap`: one degenerate frame of 8 gets its result code and an
+    all-NaN `G`, and the 7 others are what each gives alone (where `throw=True` on the bad
+    frame raises, for it alone and so for any batch that holds it)."""
+    p_ref, p_cur = np.array(scenes4.p_ref[:8]), np.array(scenes4.p_cur[:8])
+    k = 5
+    if bad == "collinear":
+        p_ref[k, 3] = p_ref[k, 0] + 2.5 * (p_ref[k, 1] - p_ref[k, 0])
+        code, cause = RESULTS.degenerate_points, "collinear or coincident"
+    else:
+        p_cur[k, 2, 1] = np.nan
+        code, cause = RESULTS.nonfinite_pixels, "not finite"
+    out = find_batch_unchecked(p_ref, p_cur)
+    assert isinstance(out, Homography) and out.G.shape == (8, 3, 3)
+    names = result_names(out.result)
+    assert names[k] == result_names(code)
+    assert np.all(np.isnan(np.asarray(out.G[k])))
+    for i in range(8):
+        if i == k:
+            continue
+        assert names[i] == "successful", (i, names)
+        alone = find_j(p_ref[i], p_cur[i])
+        # the same type, whatever `throw` says
+        assert jax.tree_util.tree_structure(alone) == jax.tree_util.tree_structure(
+            jax.tree_util.tree_map(lambda x: x[i], out)
+        )
+        np.testing.assert_allclose(out.G[i], alone.G, rtol=1e-10, atol=1e-10)
+    with pytest.raises(Exception, match=cause):
+        jax.block_until_ready(find_j(p_ref[k], p_cur[k]))
+
+
+def _loss(p_cur, p_ref, weight):
+    return jnp.sum(weight * find_homography(p_ref, p_cur, throw=False).G)
+
+
+def test_jit_and_grad_with_throw_false(scenes8):
+    """`throw=False` under `jit` gives the value of `throw=True`, and its gradient agrees
+    with a central difference; on a failed frame the gradient is finite (zero)."""
+    p_ref, p_cur = scenes8.p_ref[0], scenes8.p_cur[0]
+    weight = np.random.default_rng(0).normal(size=(3, 3))
+    out = jax.jit(lambda a, b: find_homography(a, b, throw=False))(p_ref, p_cur)
+    assert out.result == RESULTS.successful
+    np.testing.assert_allclose(out.G, find_homography(p_ref, p_cur).G, rtol=1e-12, atol=1e-12)
+    grad = jax.jit(jax.grad(_loss))
+    g = np.asarray(grad(p_cur, p_ref, weight))
+    fd = central_difference(_loss, p_cur, 1e-3, p_ref, weight)
+    assert np.max(np.abs(g - fd)) < 1e-6 * np.max(np.abs(fd))
+    bad = np.array(p_cur)
+    bad[3, 0] = np.nan
+    assert np.all(np.asarray(grad(bad, p_ref, weight)) == 0.0)
 
 
 def test_near_collinear_points():
@@ -137,7 +197,7 @@ def test_near_collinear_points():
         return p_ref, q[:, :2] / q[:, 2:]
 
     # off the line by a fifth of a pixel: still well determined
-    G = find_j(*scene(0.2))
+    G = find_j(*scene(0.2)).G
     np.testing.assert_allclose(G, H_true, rtol=1e-8, atol=1e-10)
     # off the line by 1e-9 px: reported, not returned as garbage
     with pytest.raises(RuntimeError, match="collinear or coincident"):

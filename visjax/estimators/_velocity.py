@@ -807,6 +807,38 @@ def fixed_camera(
     )
 
 
+SETTLE_FRAMES = 10
+"""`velocity_stream`'s default `settle`: the consecutive frames a new set of visible
+features must be seen in before the estimator's error signal is computed from it."""
+
+
+def consistent_frames(
+    visible: Bool[ArrayLike, "N n"], measurable: Bool[ArrayLike, " N"], settle: int
+) -> Bool[Array, " N"]:
+    """The frames to use so that the features behind each used frame's measurement are
+    those of the used frame before it (`velocity_stream(dropped="hold")`): a frame is used
+    when it is `measurable` and sees the features in use; the features in use become a
+    frame's own once the same features have been seen in `settle` consecutive frames.
+    The first frame's features are in use from the start."""
+    visible = jnp.asarray(visible, bool)
+    measurable = jnp.asarray(measurable, bool)
+    settle = int(settle)
+    if settle < 1:
+        raise ValueError(f"`settle` must be a positive number of frames; got {settle}.")
+
+    def step(carry, frame):
+        current, last, count = carry
+        vis, ok = frame
+        count = jnp.where(jnp.all(vis == last), count + 1, 1)
+        switch = ok & (count >= settle)
+        use = ok & (jnp.all(vis == current) | switch)
+        return (jnp.where(switch, vis, current), vis, count), use
+
+    start = (visible[0], visible[0], jnp.asarray(0))
+    _, used = jax.lax.scan(step, start, (visible, measurable))
+    return used
+
+
 def velocity_stream(
     ts: Float[ArrayLike, " N"],
     pixels: Float[ArrayLike, "N n 2"],
@@ -817,6 +849,7 @@ def velocity_stream(
     truth=None,
     throw: bool = True,
     chunk: int = 256,
+    settle: int = SETTLE_FRAMES,
 ) -> Stream:
     """The measurement `Stream` of the velocity estimator from raw pixel frames and the
     fixed camera's constants (`fixed_camera` measures them from the same frames).
@@ -832,18 +865,31 @@ def velocity_stream(
     (~700 bytes per prepared frame).
 
     A missing sample is a NaN pixel. With `dropped="hold"` it is a feature out of view in
-    that frame: the homography is fitted to the features seen (with more than four
-    features, any four or more; feature 1 may be among the missing), and a frame with too
-    few is marked absent in `Stream.present`, so that `run` holds the previous frame over
-    it; the first frame must be measurable. With `dropped="stop"` (default) a frame that cannot be
-    measured (a NaN pixel, degenerate points) raises with `throw=True` (one pass over the
-    frames for their result codes, `chunk` at a time), and with `throw=False` is all NaN:
+    that frame. The estimator's error signal $e$ must come from one set of features from
+    frame to frame: the homographies of two different subsets of noisy features differ,
+    and $e$ would jump by that difference between two frames, which the sign-based law
+    reads as a velocity (Chitrakaran et al.'s estimator assumes a continuous $e$, eq.
+    (36)). So a frame is used only when it sees the same features as the frame used before
+    it; a frame that misses a feature the others see is held (marked absent in
+    `Stream.present`: `run` holds the previous frame over it). A new set of features (one
+    that left the view for good) is taken once it has been seen in `settle` consecutive
+    frames: from then on the homography is fitted to the features seen (with more than
+    four features, any four or more; feature 1 may be among the missing). A frame with
+    too few features is held too; the first frame must be measurable.
+
+    With `dropped="stop"` (default) a frame that cannot be measured (a NaN pixel,
+    degenerate points) raises with `throw=True` (one pass over the frames for their result
+    codes, `chunk` at a time), and with `throw=False` is all NaN:
     `run` stops there with `RESULTS.nonfinite_measurement` and its index.
 
     `reject`: the samples an outlier test rejected, held as missing ones. (N,) bool: whole
     frames, held over like a dropped frame (the first frame must be kept); (N, n): single
     features, out of view in those frames (as a NaN pixel with `dropped="hold"`, which a
     per-feature mask needs).
+
+    `settle`: with `dropped="hold"`, the consecutive frames a new set of features must be
+    seen in before it replaces the one in use (default `SETTLE_FRAMES`, 10: 10 ms at 1 kHz;
+    1 uses every measurable frame with the features it sees).
 
     **Returns:** the `Stream` (its `measure.camera` is `camera`).
     """
@@ -874,7 +920,8 @@ def velocity_stream(
         # one pass over the frames for their result codes only, `chunk` at a time
         results = _frame_results(measure, pixels, chunk)
         if dropouts:
-            present = results == RESULTS.successful
+            visible = jnp.all(jnp.isfinite(pixels), axis=-1)
+            present = consistent_frames(visible, results == RESULTS.successful, settle)
             # the first frame starts the estimator: it must be measured
             if throw:
                 present = eqx.error_if(

@@ -18,6 +18,7 @@ from ._decomposition import (
     select_solution as select_solution,
 )
 from ._homography import (
+    Homography as Homography,
     alpha_g33 as alpha_g33,
     euclidean_homography as euclidean_homography,
     find_homography as find_homography,

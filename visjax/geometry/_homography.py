@@ -4,11 +4,14 @@ Source: Chitrakaran et al., section 3, eqs. (12), (16) and (17).
 
 Convention: the projective homography $G$ maps reference pixels to current pixels,
 $p_i = \\alpha_i G p_i^*$ (eq. (16)), with $p = [u, v, 1]^T$ and $\\alpha_i = z_i^*/z_i$.
-`find_homography` returns $G_n = G / g_{33}$ (eq. (17)), the same normalisation as
-`cv2.findHomography`. The Euclidean homography acts on normalized coordinates,
-$H = A^{-1} G A$.
+`find_homography` returns $G_n = G / g_{33}$ (eq. (17)) in its field `G`, the same
+normalisation as `cv2.findHomography`. The Euclidean homography acts on normalized
+coordinates, $H = A^{-1} G A$.
 """
 
+from typing import final
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
@@ -273,9 +276,26 @@ def _check_pair(p_ref, p_cur):
     return p_ref.astype(dtype), p_cur.astype(dtype)
 
 
+@final
+class Homography(eqx.Module):
+    """What `find_homography` returns.
+
+    **Fields:**
+
+    - `G`: the normalized projective homography $G_n = G / g_{33}$ of eq. (17), with
+        `p_cur ~ G p_ref` and `G[2, 2] == 1`; all NaN when `result` is not successful.
+    - `result`: a `RESULTS` item (always `successful` when the call was made with
+        `throw=True`, since a failure raises): `nonfinite_pixels`, `degenerate_points` or
+        `g33_zero` otherwise.
+    """
+
+    G: Float[Array, "3 3"]
+    result: RESULTS
+
+
 def find_homography(
-    p_ref: Float[ArrayLike, "n 2"], p_cur: Float[ArrayLike, "n 2"]
-) -> Float[Array, "3 3"]:
+    p_ref: Float[ArrayLike, "n 2"], p_cur: Float[ArrayLike, "n 2"], *, throw: bool = True
+) -> Homography:
     """The normalized projective homography $G_n$ with $p_i \\sim G_n p_i^*$ (eq. (17)).
 
     A normalized (Hartley) DLT: both point sets are moved to their centroid and scaled to an
@@ -286,29 +306,33 @@ def find_homography(
     Convention: `p_cur ~ G p_ref`, and `G[2, 2] == 1`, as `cv2.findHomography(p_ref, p_cur, 0)`
     returns for exact correspondences.
 
+    Differentiable: `jax.grad` of `G` with respect to `p_ref` and `p_cur` is finite, a
+    failed frame's included (degenerate inputs are swapped for a square before the fit, so
+    a failed frame of a `vmap` batch gives a zero gradient, not NaN).
+
     **Arguments:**
 
     - `p_ref`: reference pixels $p_i^*$, shape (n, 2), n >= 4.
     - `p_cur`: current pixels $p_i$, shape (n, 2).
+    - `throw`: if `True` (default), collinear or coincident points, non-finite pixels or a
+        vanishing $g_{33}$ raise at run time; with `False` the failure is reported in
+        `result` (and `G` is all NaN), so that one degenerate frame of a `jax.vmap` batch
+        leaves the others intact.
 
-    Collinear or coincident points, non-finite pixels or a vanishing $g_{33}$ raise at run
-    time; `_find_homography_checked` returns a result code instead.
-
-    **Returns:** $G_n$, shape (3, 3).
+    **Returns:** a `Homography` with `G` ($G_n$, shape (3, 3)) and `result`.
     """
-    G_n, result = _find_homography_checked(p_ref, p_cur)
-    return raise_or_keep(result, G_n, True)
-
-
-def _find_homography_checked(
-    p_ref: Float[ArrayLike, "n 2"], p_cur: Float[ArrayLike, "n 2"]
-) -> tuple[Float[Array, "3 3"], RESULTS]:
-    """`find_homography` that never raises: returns `(G_n, result)`, with `G_n` all NaN
-    when `result` is not successful (never a finite placeholder)."""
     p_ref, p_cur = _check_pair(p_ref, p_cur)
+    if not isinstance(throw, bool):
+        raise ValueError(f"`throw` must be a bool; got {throw!r}.")
+    return _find_homography(p_ref, p_cur, throw)
+
+
+@eqx.filter_jit  # one program per shape and `throw` outside `jit`; its error_if raised as
+# equinox's runtime error
+def _find_homography(p_ref, p_cur, throw: bool):
     G_n, result = _dlt(p_ref, p_cur)
-    G_n = jnp.where(result == RESULTS.successful, G_n, jnp.nan)
-    return G_n, result
+    G_n = jnp.where(result == RESULTS.successful, G_n, jnp.nan)  # never a finite placeholder
+    return raise_or_keep(result, Homography(G=G_n, result=result), throw)
 
 
 def alpha_g33(G_n: Float[ArrayLike, "3 3"], p_ref: Float[ArrayLike, "n 2"]) -> Float[Array, " n"]:

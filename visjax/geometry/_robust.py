@@ -10,8 +10,8 @@ refinement).
 
 Convention: `H` maps `src` to `dst`, $[u', v', 1]^T \\sim H [u, v, 1]^T$, with
 `H[2, 2] == 1`, the direction and scale of `cv2.findHomography(src, dst, ...)` and of
-`find_homography(p_ref=src, p_cur=dst)`. Errors are forward transfer errors in the pixels
-of `dst`, $e_i = \\| \\mathrm{dst}_i - \\pi(H\\, \\mathrm{src}_i) \\|$ (OpenCV's
+`find_homography(p_ref=src, p_cur=dst).G`. Errors are forward transfer errors in the
+pixels of `dst`, $e_i = \\| \\mathrm{dst}_i - \\pi(H\\, \\mathrm{src}_i) \\|$ (OpenCV's
 `ransacReprojThreshold` is the same quantity).
 """
 
