@@ -315,6 +315,17 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
     assert max(summary["rms_last_half"]) < 0.05  # noise-free, 0.5-1 s: converging
     est = np.load(out / "estimate.npz")
     assert est["v_hat"].shape == (1000, 6) and est["v_object"].shape == (1000, 6)
+    quality = summary["quality"]  # against zero velocity over the same window
+    assert quality["flag"] == "ok" and quality["ratio_to_trivial"] < 0.5, quality
+    # the same frames with 0.1 px of noise: the sign-based law amplifies it past what
+    # answering zero would give: the result says so (exit 1, its files kept)
+    noisy = velocity_example(duration=1.0, noise_px=0.1).save(tmp_path / "noisy.npz")
+    capsys.readouterr()
+    out = tmp_path / "noisy"
+    assert main(["velocity", "--data", str(noisy), "--quiet", "--out", str(out)]) == 1
+    summary = _summary(out)
+    assert summary["result"] == "worse_than_trivial" and summary["quality"]["ratio_to_trivial"] >= 1
+    assert "the result is worse_than_trivial" in capsys.readouterr().err
     # without the truth: no errors reported
     data.velocity = None
     data.save(tmp_path / "v2.npz")

@@ -374,3 +374,70 @@ def test_ray_address_with_nothing_listening_is_one_line(capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"--ray 127.0.0.1:{port}: nothing answers" in err, err
     assert time.perf_counter() - started < 30
+
+
+class _Far(studies.AbstractProblem):
+    """Estimates 2 from noisy samples; its estimator answers `offset + mean`: with a large
+    offset, worse than the trivial estimate 0 (whose error is 2)."""
+
+    methods = ("estimator", "mean")
+    metric = "error"
+    trivial_label = "zero"
+
+    samples: jax.Array
+    offset: float = eqx.field(static=True, default=0.0)
+
+    def parameters(self):
+        return {"gain": studies.Parameter(1.0, "-", True, "a gain")}
+
+    def inputs(self, key):
+        return self.samples + 0.01 * jax.random.normal(key, self.samples.shape)
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        shift = self.offset if method == "estimator" else 0.0
+        return _Stopped(
+            jnp.arange(4.0), {"value": jnp.mean(inputs) + shift}, RESULTS.successful, jnp.array(-1)
+        )
+
+    def metrics(self, method, solution):
+        return {"error": jnp.abs(solution.outputs["value"] - 2.0)}
+
+    def trivial(self):
+        return {"error": jnp.asarray(2.0)}
+
+
+@pytest.mark.parametrize("offset, flag", [(0.1, "ok"), (3.0, "worse_than_trivial")])
+def test_an_estimate_worse_than_the_trivial_one_is_not_a_success(offset, flag, tmp_path, capsys):
+    """Issue 44: `run` compares the estimate with the trivial one (`trivial()`): an error
+    at least `QUALITY_RATIO` times the trivial error is the result `worse_than_trivial`
+    (exit 1, files kept, `quality` recorded); `compare` counts such runs per method."""
+    from visjax.studies import _registry
+
+    name = f"far-toy-{flag}"
+    studies.register_problem(
+        name, lambda *, noise_px=0.0: _Far(jnp.full(8, 2.0), offset), replace=True
+    )
+    try:
+        out = tmp_path / "run"
+        assert main(["run", name, "--quiet", "--out", str(out)]) == (0 if flag == "ok" else 1)
+        printed = capsys.readouterr()
+        summary = io.read_summary(out / "summary.json")
+        q = summary["quality"]
+        assert q["flag"] == flag and q["trivial"] == 2.0 and q["trivial_estimate"] == "zero"
+        np.testing.assert_allclose(q["ratio_to_trivial"], summary["metrics"]["error"] / 2.0)
+        if flag == "ok":
+            assert summary["result"] == "successful" and printed.err == ""
+        else:
+            assert summary["result"] == "worse_than_trivial"
+            assert printed.err.startswith(f"visjax: error: run {name}: the result is worse")
+        out = tmp_path / "compare"
+        assert main(["compare", name, "--seeds", "3", "--quiet", "--out", str(out)]) == 0
+        summary = io.read_summary(out / "summary.json")
+        expected = {"estimator": 0 if flag == "ok" else 3, "mean": 0}
+        assert summary["quality"]["worse_than_trivial"] == expected
+        assert all(r["ratio_to_trivial"] is not None for r in summary["records"])
+        assert ("warning: 3 run(s) no better than zero" in capsys.readouterr().out) == (
+            flag != "ok"
+        )
+    finally:
+        _registry._REGISTRY.pop(name, None)

@@ -306,7 +306,7 @@ def run_command(
 
     from ._results import result_names
     from .report import RunFailed
-    from .studies import as_json, solution
+    from .studies import as_json, quality, solution
 
     results, failures = {}, []
     dropped = _dropped(problem, data)
@@ -327,6 +327,10 @@ def run_command(
         elif dropped is not None and dropped["over"]:
             code = dropped["result"]
             failure = f"run {problem}: {head}the result is {code}: {dropped['line']}"
+        judged = quality(p, values) if ok else None
+        if failure is None and judged is not None and judged["flag"] != "ok":
+            code = judged["flag"]
+            failure = f"run {problem}: {head}the result is {code}: {_quality_line(judged)}"
         body = {
             "problem": p.title,
             "method": m,
@@ -338,7 +342,11 @@ def run_command(
         }
         if dropped is not None:
             body["dropped_fraction"] = dropped["fraction"]
+        if judged is not None:
+            body["quality"] = judged
         print(f"{head}{p.title}: {m}, {code}")
+        if judged is not None:
+            print(f"{head}  quality: {_quality_line(judged)}")
         if dropped is not None:
             print(f"{head}  {dropped['line']}")
         for k, v in body["metrics"].items():
@@ -362,6 +370,47 @@ def run_command(
         more = f" (and {len(failures) - 1} more)" if len(failures) > 1 else ""
         raise RunFailed(failures[0] + more)
     return summary
+
+
+def _judge_records(problem, records: list, body: dict) -> dict | None:
+    """Each successful record's `ratio_to_trivial` (`studies.quality`), and into `body` the
+    `quality` of the comparison: the trivial estimate, its metric, the threshold and, per
+    method, the runs no better than it. **Returns:** that count per method (`None` for a
+    problem without a trivial estimate)."""
+    from .studies import quality
+
+    counts: dict[str, int] = {m: 0 for m in problem.methods}
+    judged, trivial = None, problem.trivial() if problem.scored else {}
+    for r in records:
+        value = r.get(problem.metric)
+        if r["result"] != "successful" or value is None:
+            continue
+        judged = quality(problem, {problem.metric: value}, trivial)
+        if judged is None:
+            return None
+        r["ratio_to_trivial"] = judged["ratio_to_trivial"]
+        counts[r["method"]] += judged["flag"] != "ok"
+    if judged is None:
+        return None
+    body["quality"] = {
+        "trivial_estimate": judged["trivial_estimate"],
+        "metric": judged["metric"],
+        "trivial": judged["trivial"],
+        "threshold": judged["threshold"],
+        "worse_than_trivial": counts,
+    }
+    return counts
+
+
+def _quality_line(judged: dict) -> str:
+    """`studies.quality`'s verdict as one line."""
+    ratio = judged["ratio_to_trivial"]
+    times = "not finite" if ratio is None else f"{ratio:.3g} times"
+    verdict = "no better than" if judged["flag"] != "ok" else "below"
+    return (
+        f"{judged['metric']} is {times} that of {judged['trivial_estimate']} "
+        f"({judged['trivial']:.4g}): {verdict} it (threshold {judged['threshold']:g})"
+    )
 
 
 def _dropped(problem, data) -> dict | None:
@@ -469,12 +518,14 @@ def compare_command(
         label = p.label or p.metric
         print(f"{head}{p.title}: {seeds} noise seed(s); {p.metric}: {label}")
         _say_dropped(body, dropped, head)
+        worse = _judge_records(p, records, body)
         # the problem's predicted spread (`uncertainty`: keys `<metric>_std`), if any
         std_key = next((k for k in records[0] if k.endswith("_std")), None)
         std_head = f"{'predicted ' + std_key:>28}" if std_key else ""
+        worse_head = f"{'worse than trivial':>20}" if worse is not None else ""
         print(
             f"{'method':<14}{'failed':>8}{p.metric + ' (median)':>24}{std_head}"
-            f"{'latency/sample (s)':>20}"
+            f"{'latency/sample (s)':>20}{worse_head}"
         )
         for m in p.methods:
             rows = [r for r in records if r["method"] == m]
@@ -487,7 +538,14 @@ def compare_command(
                 worst = [_worst(r[std_key]) for r in rows]
                 worst = [w for w in worst if w is not None]
                 std = f"{np.median(worst):>28.4g}" if worst else f"{'-':>28}"
-            print(f"{m:<14}{failed:>8}{acc:>24}{std}{lat:>20.3g}")
+            bad = "" if worse is None else f"{worse[m]:>20}"
+            print(f"{m:<14}{failed:>8}{acc:>24}{std}{lat:>20.3g}{bad}")
+        if worse is not None and any(worse.values()):
+            q = body["quality"]
+            print(
+                f"{head}warning: {sum(worse.values())} run(s) no better than "
+                f"{q['trivial_estimate']} ({p.metric} {q['trivial']:.4g}; column above)"
+            )
         folder = _folder(out, tag)
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)

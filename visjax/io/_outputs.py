@@ -33,9 +33,11 @@ COMMON = {
 _ORDER = ("list[str]", "the order of the six components: vx, vy, vz, wx, wy, wz")
 _DATA_RESULT = (
     "str",
-    "`successful`; the result code of a run that stopped; or `too_many_dropped_frames` "
+    "`successful`; the result code of a run that stopped; `too_many_dropped_frames` "
     "(a successful run on a file whose frames miss a feature in more than "
-    "`visjax.io.MAX_DROPPED_FRACTION` of them)",
+    "`visjax.io.MAX_DROPPED_FRACTION` of them); or `worse_than_trivial` (with the truth: "
+    "an error at least `visjax.studies.QUALITY_RATIO` times the trivial estimate's, "
+    "`quality`)",
 )
 _DROPPED = (
     "float",
@@ -91,6 +93,12 @@ SUMMARIES = {
         "window_s?": ("list[float]", "with the truth: that window, s"),
         "filter_hz?": ("float", "with `--filter-hz`: the low-pass bandwidth, Hz"),
         "filter_delay_s?": ("float", "with `--filter-hz`: the filter's group delay, s"),
+        "quality?": (
+            "dict",
+            "with the truth: the worst RMS error against zero velocity's over the same "
+            "window (`trivial`, `ratio_to_trivial`, per component `ratios`, `threshold`, "
+            "`flag`: `ok` or `worse_than_trivial`, then also the `result`)",
+        ),
         "dropped_fraction?": _DROPPED,
         "failed_sample?": _FAILED_SAMPLE,
     },
@@ -164,6 +172,12 @@ SUMMARIES = {
         "gains": ("dict", "the gains run (the problem's defaults)"),
         "problem_settings": ("dict", "the problem's scenario and methods"),
         "dropped_fraction?": _DROPPED_STUDY,
+        "quality?": (
+            "dict",
+            "with the truth, for a problem with a trivial estimate (`studies.quality`): "
+            "`trivial_estimate`, `metric`, `trivial` (its value), `ratio_to_trivial`, "
+            "`threshold`, `flag` (`ok`, or `worse_than_trivial`, then also the `result`)",
+        ),
     },
     "compare": {
         "problem": ("str", "the registered problem's name (as given on the command line)"),
@@ -173,6 +187,13 @@ SUMMARIES = {
         "problem_settings": ("dict", "the problem's scenario and methods"),
         "records": ("list[dict]", "one per method and seed (the rows of `records.parquet`)"),
         "dropped_fraction?": _DROPPED_STUDY,
+        "quality?": (
+            "dict",
+            "with the truth, for a problem with a trivial estimate: `trivial_estimate`, "
+            "`metric`, `trivial` (its value), `threshold`, and `worse_than_trivial`, per "
+            "method the successful runs whose metric is at least `threshold` times the "
+            "trivial one (each record's `ratio_to_trivial`)",
+        ),
     },
     "sweep": {
         "metric": ("str", "the metric minimised"),

@@ -204,7 +204,43 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
         k = np.searchsorted(np.asarray(data.t), ts + 1e-9, side="right") - 1
         truth = np.asarray(data.velocity)[k]
         body["rms_last_half"], body["window_s"] = last_half_rms(ts, shown, truth)
+        zero, _ = last_half_rms(ts, np.zeros_like(shown), truth)  # the trivial estimate
+        body["quality"] = _quality(body["rms_last_half"], zero, "zero velocity")
+        if failure is None and body["quality"]["flag"] != "ok":
+            body["result"] = body["quality"]["flag"]
+            failure = f"velocity: the result is {body['result']}: {_quality_words(body)}"
     return FileEstimate(body, arrays, ts, shown, truth, failure)
+
+
+def _quality(rms, trivial, what: str) -> dict:
+    """The run's error against the trivial estimate's over the same window, as
+    `visjax.studies.quality` judges a problem's run: the worst component of each, their
+    ratio, per component too, and the flag at `QUALITY_RATIO`."""
+    from ..studies import QUALITY_RATIO
+
+    worst, base = max(rms), max(trivial)
+    ratio = worst / base if base > 0 else float("inf")
+    worse = not np.isfinite(ratio) or ratio >= QUALITY_RATIO
+    return {
+        "trivial_estimate": what,
+        "metric": "rms_worst",
+        "trivial": base,
+        "ratio_to_trivial": ratio if np.isfinite(ratio) else None,
+        "ratios": [r / t if t > 0 else None for r, t in zip(rms, trivial)],
+        "threshold": QUALITY_RATIO,
+        "flag": "worse_than_trivial" if worse else "ok",
+    }
+
+
+def _quality_words(body) -> str:
+    q = body["quality"]
+    ratio = q["ratio_to_trivial"]
+    times = "not finite" if ratio is None else f"{ratio:.3g} times"
+    verdict = "no better than it: not to be trusted" if q["flag"] != "ok" else "below it"
+    return (
+        f"the worst RMS error over the second half is {times} that of {q['trivial_estimate']}"
+        f" ({q['trivial']:.4g}): {verdict}"
+    )
 
 
 def moving_point_from_file(path) -> FileEstimate:
@@ -346,6 +382,7 @@ def velocity_file_reproduction(path, filter_hz=None, *, quiet=True, write=None) 
         f"recovered z1* = {_number(body['z1_star'], '.6f')} m; result: {body['result']}",
         _coverage_line(body),
         *_last_half_lines(body, "RMS error", DOF_NAMES),
+        *([f"quality: {_quality_words(body)}"] if "quality" in body else []),
     ]
     rep = _file_reproduction(
         run, "velocity", functools.partial(plot_velocity, title=title), lines, write

@@ -66,6 +66,7 @@ class VelocityProblem(AbstractProblem):
     methods = ("estimator", "batch", "batch_window", "ekf")
     metric = "rms_worst"
     label = "worst-axis RMS over the window (m/s, rad/s)"
+    trivial_label = "zero velocity"
     grid = "K_scale=1e-3:1e1:9,rho_scale=1e-3:1e1:9"
 
     ts: Any
@@ -251,6 +252,19 @@ class VelocityProblem(AbstractProblem):
         else:
             truth = held(self.ts, self.truth, solution.ts)
             rms = self._window().over(solution.ts, solution.outputs, truth).rms
+        return {"rms_worst": jnp.max(rms), "rms": rms}
+
+    def trivial(self):
+        """The metrics of answering zero velocity over the scoring window: the RMS of the
+        true velocity there."""
+        if self.truth is None:
+            return {}
+        from ..estimators import WindowRMS
+
+        w = self._window()
+        rms = (
+            WindowRMS(w.t_start, w.t_end).over(self.ts, jnp.zeros_like(self.truth), self.truth).rms
+        )
         return {"rms_worst": jnp.max(rms), "rms": rms}
 
     def uncertainty(self, method, solution):

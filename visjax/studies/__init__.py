@@ -15,6 +15,7 @@ from ._parts import (
     merge_parts as merge_parts,
 )
 from ._problem import (
+    QUALITY_RATIO as QUALITY_RATIO,
     AbstractProblem as AbstractProblem,
     Evaluation as Evaluation,
     Parameter as Parameter,
@@ -23,6 +24,7 @@ from ._problem import (
     evaluate as evaluate,
     fingerprint as fingerprint,
     held as held,
+    quality as quality,
     solution as solution,
 )
 from ._registry import (

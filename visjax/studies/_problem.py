@@ -79,7 +79,10 @@ class AbstractProblem(eqx.Module):
     chosen point, e.g. a stability certificate, JSON-able, merged into the sweep's and
     tune's summaries) and `check_lines(summary)` (them, as printed lines);
     `uncertainty(method, solution)` (the predicted standard deviations of what the metrics
-    score, from a batch method's covariance; `compare` reports them); `figure(method,
+    score, from a batch method's covariance; `compare` reports them); `trivial()` (the
+    metrics of the trivial estimate, what one would answer knowing nothing: zero velocity,
+    the initial depth guess; `run` and `compare` flag an estimate no better than it,
+    `quality`); `figure(method,
     solution)` (a matplotlib figure of one solution against the truth); and
     `defaults_label` (what printed reports and figures call the default parameters:
     `"paper"` where they are a paper's published gains, else e.g. `"defaults"`; the
@@ -91,6 +94,7 @@ class AbstractProblem(eqx.Module):
     label: ClassVar[str] = ""
     grid: ClassVar[str] = ""
     defaults_label: ClassVar[str] = "paper"
+    trivial_label: ClassVar[str] = "the trivial estimate"
 
     @abc.abstractmethod
     def parameters(self) -> dict[str, Parameter]:
@@ -140,12 +144,27 @@ class AbstractProblem(eqx.Module):
         (`None` where NaN). Default: none."""
         return {}
 
+    def trivial(self) -> dict[str, jax.Array]:
+        """Name -> array: the metrics of the trivial estimate (`trivial_label`: what one
+        would answer knowing nothing, e.g. zero velocity or the initial guess held), with
+        the names of `metrics`, against the same truth. An estimate whose headline metric
+        is not below `QUALITY_RATIO` times the trivial one's is worse than no estimate:
+        `run` reports it with the result `worse_than_trivial` and `compare` counts it
+        (`quality`). Default: none (no such check)."""
+        return {}
+
     def figure(self, method: str, solution):
         """A figure of one solution (made with `outputs=True`): each saved output field
         over time. Problems override it to draw the truth beside the estimate."""
         import matplotlib.pyplot as plt
 
         fields = _output_fields(solution)
+        if not fields:  # no time series (a scalar estimate): say so on the figure
+            fig, ax = plt.subplots(figsize=(7, 2.2))
+            ax.axis("off")
+            ax.text(0.5, 0.5, "no time series saved", ha="center", va="center")
+            fig.suptitle(f"{self.title}: {method}")
+            return fig
         fig, axes = plt.subplots(len(fields), 1, figsize=(7, 2.2 * len(fields)), squeeze=False)
         for ax, (name, values) in zip(axes[:, 0], fields.items()):
             ax.plot(np.asarray(solution.ts), values.reshape(values.shape[0], -1))
@@ -416,6 +435,37 @@ def as_json(values: Mapping[str, Any], ok: bool, nullable: bool = False) -> dict
                 number(a) if a.ndim == 0 else np.vectorize(number, otypes=[object])(a).tolist()
             )
     return out
+
+
+QUALITY_RATIO = 1.0
+"""An estimate whose headline metric is at least this multiple of the trivial estimate's
+(`AbstractProblem.trivial`) is reported as `worse_than_trivial`: no better than answering
+nothing."""
+
+
+def quality(problem: AbstractProblem, values: Mapping[str, Any], trivial=None) -> dict | None:
+    """How a run's metrics (`values`, as `metrics` returns them) compare with the trivial
+    estimate's (`problem.trivial()`): `{"trivial_estimate", "metric", "trivial",
+    "ratio_to_trivial", "threshold", "flag"}`, `flag` `"worse_than_trivial"` when the
+    headline metric is at least `QUALITY_RATIO` times the trivial one's (or not finite),
+    else `"ok"`; `None` for a problem without a trivial estimate or truth. `trivial`:
+    `problem.trivial()` computed once (for many runs of one problem)."""
+    if trivial is None:
+        trivial = problem.trivial() if problem.scored else {}
+    if problem.metric not in trivial or problem.metric not in values:
+        return None
+    base = float(np.max(np.asarray(trivial[problem.metric], float)))
+    value = float(np.max(np.asarray(values[problem.metric], float)))
+    ratio = value / base if base > 0 else float("inf")
+    worse = not np.isfinite(ratio) or ratio >= QUALITY_RATIO
+    return {
+        "trivial_estimate": problem.trivial_label,
+        "metric": problem.metric,
+        "trivial": base,
+        "ratio_to_trivial": ratio if np.isfinite(ratio) else None,
+        "threshold": QUALITY_RATIO,
+        "flag": "worse_than_trivial" if worse else "ok",
+    }
 
 
 def point_names(problem: AbstractProblem, names: Sequence[str]) -> None:
