@@ -441,3 +441,29 @@ def test_an_estimate_worse_than_the_trivial_one_is_not_a_success(offset, flag, t
         )
     finally:
         _registry._REGISTRY.pop(name, None)
+
+
+def test_seed_loops_are_timed_against_max_hours(monkeypatch):
+    """Issue 44: `velocity|moving_point|static_points --seeds N` estimate the whole loop
+    after the second seed (the first reuses the compiled run) and refuse it past
+    `--max-hours`, before the rest; within it, nothing is said."""
+    from visjax.papers import _reproduction
+
+    now = iter([0.0, 30.0, 31.0, 32.0])  # start; seed 1 (compiles): 30 s; then 1 s each
+    monkeypatch.setattr(_reproduction.time, "perf_counter", lambda: next(now))
+    clock = _reproduction.SeedClock(1_000_000, 24.0, "velocity")
+    clock.tick()
+    with pytest.raises(studies.StudyTooLong, match=r"velocity: 1000000 runs estimated at 278 h"):
+        clock.tick()
+    now = iter([0.0, 30.0, 31.0, 32.0])
+    clock = _reproduction.SeedClock(1000, 24.0, "velocity")
+    for _ in range(3):
+        clock.tick()  # 30 s + 999 s: well within a day
+
+
+@pytest.mark.slow  # two velocity runs (a compile)
+def test_velocity_seeds_past_max_hours_are_refused_in_one_line(capsys):
+    argv = ["velocity", "--duration", "0.05", "--noise", "0.1", "--seeds", "100000", "--quiet"]
+    assert main([*argv, "--max-hours", "0.001"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "100000 runs estimated at" in err and "--max-hours" in err

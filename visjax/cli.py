@@ -140,6 +140,7 @@ def _common(p, out=_OUT, noise=None, seed=None, seeds=None, data=None, fmt=True)
 
 _SEEDS = (1, "noise seeds from --seed (default 1): medians and 10-90%% bands over them")
 _FIRST = "the first noise seed (default 0)"
+_HOURS = "refuse, after the second seed, --seeds estimated to take longer (default 24)"
 
 
 def _verb(sub, name, help, *, seeds, noise, grid):
@@ -184,15 +185,18 @@ def build_parser() -> argparse.ArgumentParser:
     _arg(v, "--rho", _six, _six(RHO_DEFAULT), f'diagonal of rho (default "{RHO_DEFAULT}")')
     _arg(v, "--filter-hz", _positive, None, "with --data: a causal 2nd-order low-pass")
     _common(v, _OUT, 0.0, _FIRST, _SEEDS, _OWN_DATA)
+    _arg(v, "--max-hours", _positive, 24.0, _HOURS)
 
     st = _problem_parser(sub, "moving_point", "structure", "Jang's unknown input observer")
     _arg(st, "--set", None, None, "I.1 ... II.3 (repeatable; default: all)", action="append")
     _arg(st, "--duration", _positive, 30.0, "seconds per set (default 30)")
     _common(st, _OUT, 0.1, _FIRST, _SEEDS, _OWN_DATA)
+    _arg(st, "--max-hours", _positive, 24.0, _HOURS)
 
     eu = _problem_parser(sub, "static_points", "euclidean", "Nath et al.'s uncalibrated camera")
     _arg(eu, "--duration", _positive, 30.0, "seconds (default 30)")
     _common(eu, _OUT, 0.0, _FIRST, _SEEDS, _OWN_DATA)
+    _arg(eu, "--max-hours", _positive, 24.0, _HOURS)
     _arg(eu, "--noise-px", _nonnegative, None, argparse.SUPPRESS, dest="noise")  # 0.2's name
 
     run = _verb(sub, "run", "one method of a problem once", seeds=None, noise=0.0, grid=False)

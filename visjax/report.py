@@ -75,7 +75,7 @@ def geometry_report(
 
 def velocity_report(
     duration=10.0, rate=1000.0, noise=0.0, seed=0, K=None, rho=None, out=None, quiet=False,
-    formats=("png",), seeds=1,
+    formats=("png",), seeds=1, max_hours=24.0,
 ) -> dict:  # fmt: skip
     """Chitrakaran et al., section 6 (`papers.chitrakaran.velocity_reproduction`): the
     velocity estimator on the paper's simulation. Writes `summary.json` (kind `velocity`),
@@ -89,7 +89,16 @@ def velocity_report(
         out,
         formats,
         lambda write: velocity_reproduction(
-            duration, rate, noise, seed=seed, seeds=seeds, K=K, rho=rho, quiet=quiet, write=write
+            duration,
+            rate,
+            noise,
+            seed=seed,
+            seeds=seeds,
+            K=K,
+            rho=rho,
+            quiet=quiet,
+            write=write,
+            max_hours=max_hours,
         ),
     )
 
@@ -144,8 +153,9 @@ def static_points_data_report(path, out=None, quiet=False, formats=("png",)) -> 
 
 
 def moving_point_report(
-    sets=None, duration=30.0, noise=0.1, seed=0, out=None, quiet=False, formats=("png",), seeds=1
-) -> dict:
+    sets=None, duration=30.0, noise=0.1, seed=0, out=None, quiet=False, formats=("png",), seeds=1,
+    max_hours=24.0,
+) -> dict:  # fmt: skip
     """Jang's thesis (`papers.jang.structure_reproduction`): the UIO on the simulated
     analogues of the seven experiment sets, beside the thesis' Tables 5-3/5-4. Writes
     `summary.json` (kind `structure`), `sets.parquet`, per set `estimate_<set>.npz`,
@@ -159,14 +169,22 @@ def moving_point_report(
         out,
         formats,
         lambda write: structure_reproduction(
-            sets, duration, noise, seed=seed, seeds=seeds, quiet=quiet, write=write
+            sets,
+            duration,
+            noise,
+            seed=seed,
+            seeds=seeds,
+            quiet=quiet,
+            write=write,
+            max_hours=max_hours,
         ),
     )
 
 
 def static_points_report(
-    duration=30.0, noise=0.0, seed=0, out=None, quiet=False, formats=("png",), seeds=1
-) -> dict:
+    duration=30.0, noise=0.0, seed=0, out=None, quiet=False, formats=("png",), seeds=1,
+    max_hours=24.0,
+) -> dict:  # fmt: skip
     """Nath et al. (`papers.nath.euclidean_reproduction`): the adaptive least-squares
     structure estimator on its simulation. Writes `summary.json` (kind `euclidean`),
     `estimate.npz` and `euclidean.<format>`."""
@@ -179,7 +197,13 @@ def static_points_report(
         out,
         formats,
         lambda write: euclidean_reproduction(
-            duration, noise, seed=seed, seeds=seeds, quiet=quiet, write=write
+            duration,
+            noise,
+            seed=seed,
+            seeds=seeds,
+            quiet=quiet,
+            write=write,
+            max_hours=max_hours,
         ),
     )
 

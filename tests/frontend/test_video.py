@@ -28,3 +28,25 @@ def test_overlays_drawn_where_given_and_skipped_where_not(tmp_path):
     with np.load(write_video(tmp_path / "v.npz", out, 30.0)) as saved:  # colour, lossless
         np.testing.assert_array_equal(saved["frames"], out)
         assert float(saved["fps"]) == 30.0
+
+
+def test_a_video_too_large_once_decoded_is_refused_before_decoding(tmp_path, monkeypatch):
+    """Issue 44: the decoded size (frames x width x height, and the stack's copy) is
+    checked against `visjax.io.max_data_bytes()` from the container's header, before any
+    frame is decoded; an implausible `fps` (1e-9: tracks 1e9 s apart) is refused."""
+    import pytest
+
+    from visjax.frontend import read_video
+    from visjax.io import DataFormatError
+
+    frames = np.zeros((10, 48, 64), np.uint8)
+    frames[:, 10:20, 10:20] = 200
+    path = write_video(tmp_path / "v.mp4", frames, 30.0)
+    assert read_video(path)[0].shape == (10, 48, 64)
+    monkeypatch.setenv("VISJAX_MAX_DATA_BYTES", str(2 * 10 * 48 * 64 - 1))
+    with pytest.raises(DataFormatError, match=r"10 frames of 3072 pixels decode to .*limit"):
+        read_video(path)
+    monkeypatch.delenv("VISJAX_MAX_DATA_BYTES")
+    np.savez(tmp_path / "slow.npz", frames=frames, fps=1e-9)
+    with pytest.raises(DataFormatError, match="`fps` is 1e-09, outside the plausible"):
+        read_video(tmp_path / "slow.npz")

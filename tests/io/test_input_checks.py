@@ -37,7 +37,7 @@ def _velocity(N=12, n=5):
     rng = np.random.default_rng(0)
     return VelocityData(
         t=np.arange(N) / 30.0,
-        pixels=rng.uniform(0, 600, (N, n, 2)),
+        pixels=rng.uniform(1, 479, (N, n, 2)),
         A=A.copy(),
         R_star=_rotation(0.3),
         s1=np.array([0.1, -0.1, 0.0]),
@@ -49,7 +49,7 @@ def _structure(N=12, M=40):
     rng = np.random.default_rng(1)
     return MovingPointData(
         t=np.arange(N) / 30.0,
-        pixels=rng.uniform(0, 600, (N, 2)),
+        pixels=rng.uniform(1, 479, (N, 2)),
         A=A.copy(),
         camera_t=np.arange(M) / 100.0,
         camera_velocity=rng.normal(size=(M, 6)),
@@ -61,7 +61,7 @@ def _euclidean(N=12, n=6, k=4):
     rng = np.random.default_rng(2)
     return StaticPointsData(
         t=np.arange(N) / 30.0,
-        pixels=rng.uniform(0, 600, (N, n, 2)),
+        pixels=rng.uniform(1, 479, (N, n, 2)),
         platform_R=np.stack([_rotation(0.01 * i) for i in range(N)]),
         platform_x=rng.normal(size=(N, 3)),
         known_features=rng.normal(size=(k, 3)),
@@ -403,3 +403,69 @@ def test_the_command_line_says_one_line(tmp_path, capsys):
     assert len(lines) == 1 and lines[0].startswith("visjax: error:"), proc.stderr
     assert "Traceback" not in proc.stderr and "truncated or damaged zip" in lines[0]
     assert not (tmp_path / "out").exists()
+
+
+# physical plausibility (issue 44)
+
+
+@pytest.mark.parametrize("length", [1e300, 1e-300, 250.0e3 * 1e3, 2e-5])
+def test_a_known_length_outside_the_plausible_range_is_refused(tmp_path, length):
+    data = _velocity()
+    path = _saved(tmp_path, data, known_length=np.array([0.0, 2.0, length]))
+    _refused(path, VelocityData, "`known_length[2]`", "outside the plausible", "0.0001 to 10000 m")
+    ok = _saved(tmp_path, data, known_length=np.array([0.0, 2.0, 1e-3]))
+    assert VelocityData.load(ok).length[2] == 1e-3
+
+
+def test_pixels_outside_the_image_the_intrinsics_imply_are_refused(tmp_path):
+    """Negative pixels (a mirrored export) or beyond twice the principal point, in each
+    format, name the key and the span."""
+    for data, cls in ((_velocity(), VelocityData), (_euclidean(), StaticPointsData)):
+        mirrored = -np.asarray(data.pixels)
+        _refused(_saved(tmp_path, data, pixels=mirrored), cls, "`pixels`'s u", "mirrored")
+        shifted = np.asarray(data.pixels) + np.array([0.0, 300.0])
+        _refused(_saved(tmp_path, data, pixels=shifted), cls, "`pixels`'s v", "0 to 480 px")
+    st = _structure()
+    _refused(_saved(tmp_path, st, pixels=-st.pixels), MovingPointData, "`pixels`'s u")
+    v = _velocity()
+    ref = np.asarray(v.pixels[0]) * np.array([1.0, -1.0])
+    _refused(_saved(tmp_path, v, reference_pixels=ref), VelocityData, "`reference_pixels`'s v")
+
+
+def test_integer_pixels_with_zero_marks_need_missing_value(tmp_path):
+    """Integer pixels with lost features stored as (0, 0) (a common export) are refused;
+    declared with `missing_value`, those observations load as missing (NaN) and count in
+    `dropped_fraction`."""
+    data = _velocity(N=20)
+    pixels = np.round(np.asarray(data.pixels)).astype(np.int32)
+    pixels[[3, 7], 2] = 0
+    path = _saved(tmp_path, data, pixels=pixels, t=np.arange(20) / 30.0)
+    _refused(path, VelocityData, "2 observation(s) at exactly (0, 0)", "missing_value")
+    path = _saved(tmp_path, data, pixels=pixels, t=np.arange(20) / 30.0, missing_value=0)
+    loaded = VelocityData.load(path)
+    assert np.isnan(loaded.pixels[[3, 7], 2]).all() and np.isfinite(loaded.pixels[0]).all()
+    assert loaded.dropped_fraction() == pytest.approx(2 / 20)
+    path = _saved(tmp_path, data, missing_value=np.array([0, 0]))
+    _refused(path, VelocityData, "`missing_value` must be one finite number")
+    st = _euclidean()
+    marks = np.asarray(st.pixels).copy()
+    marks[5, 1] = 0.0
+    _refused(_saved(tmp_path, st, pixels=marks), StaticPointsData, "exactly (0, 0)")
+
+
+def test_a_moving_point_truth_behind_the_camera_is_refused(tmp_path):
+    st = _structure()
+    position = np.tile([0.1, 0.0, 2.0], (12, 1))
+    assert MovingPointData.load(_saved(tmp_path, st, position=position)).position is not None
+    position[4, 2] = -2.0  # another sign convention from frame 4
+    path = _saved(tmp_path, st, position=position)
+    _refused(path, MovingPointData, "`position`", "behind the camera at frame 4", "z = -2")
+
+
+def test_a_csv_whose_feature_index_would_need_gibibytes_is_refused(tmp_path):
+    """Issue 44: 2 rows with feature index 999999999 would ask for 29.8 GiB: refused
+    before any allocation, naming the size."""
+    csv = tmp_path / "tracks.csv"
+    csv.write_text("t,feature,u,v\n0,0,1,2\n0.033,999999999,3,4\n")
+    with pytest.raises(DataFormatError, match=r"999999999|1000000000 features.*GiB"):
+        load_tracks_csv(csv)

@@ -262,5 +262,5 @@ def test_registry():
     with pytest.raises(ValueError, match="unknown problem"):
         studies.problem("no_such_problem")
     studies.register_problem("toy_bad", lambda: 3, replace=True)
-    with pytest.raises(TypeError, match="AbstractProblem"):
+    with pytest.raises(studies.UserCodeError, match="returned int, not a visjax.studies.Abstr"):
         studies.problem("toy_bad")

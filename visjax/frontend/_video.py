@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import MAX_INTERVAL_S, MIN_INTERVAL_S, DataFormatError, max_data_bytes, read_npz
+
 # a line of FFmpeg's log: `[mpeg4 @ 0x55d1c0a3e780] ac-tex damaged at 3 0`
 _DECODER_LINE = re.compile(r"^\[[^\]]+ @ 0x[0-9a-fA-F]+\] ")
 
@@ -31,6 +33,12 @@ def _check_fps(fps) -> float:
         raise ValueError(f"`fps` must be a positive number; got {fps!r}.") from None
     if not (np.isfinite(value) and value > 0):
         raise ValueError(f"`fps` must be a positive number; got {fps!r}.")
+    low, high = 1.0 / MAX_INTERVAL_S, 1.0 / MIN_INTERVAL_S
+    if not low <= value <= high:
+        raise ValueError(
+            f"`fps` is {value:g}, outside the plausible {low:g} to {high:g} frames per "
+            "second (visjax.io.MAX_INTERVAL_S, MIN_INTERVAL_S): frames per second?"
+        )
     return value
 
 
@@ -116,14 +124,10 @@ def read_video(path, *, allow_damaged: bool = False) -> tuple[np.ndarray, float]
     descriptor 2 while decoding) then make it a `DataFormatError` too, naming the first;
     `allow_damaged=True` returns the frames anyway (the complaints still printed).
     """
-    from ..io import DataFormatError
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such video file.")
     if path.suffix.lower() == ".npz":
-        from ..io import read_npz
-
         data = read_npz(path)  # a DataFormatError (a ValueError): one line, no traceback
         if "frames" not in data or "fps" not in data:
             raise DataFormatError(f"{path}: expected the keys 'frames' and 'fps'.")
@@ -141,12 +145,31 @@ def read_video(path, *, allow_damaged: bool = False) -> tuple[np.ndarray, float]
             opened = capture.isOpened()
             fps = float(capture.get(cv2.CAP_PROP_FPS))
             declared = int(max(capture.get(cv2.CAP_PROP_FRAME_COUNT), 0))
+            size = int(
+                capture.get(cv2.CAP_PROP_FRAME_WIDTH) * capture.get(cv2.CAP_PROP_FRAME_HEIGHT)
+            )
+            limit = max_data_bytes()
+            if opened and 2 * declared * size > limit:  # the frames, then their stack
+                raise DataFormatError(
+                    f"{path}: {declared} frames of {size} pixels decode to "
+                    f"{2 * declared * size / 2**30:.3g} GiB (grey, with their copy), above the "
+                    f"limit of {limit / 2**30:.3g} GiB (VISJAX_MAX_DATA_BYTES): cut the "
+                    "video, or raise the limit"
+                )
+            total = 0
             while opened:
                 ok, frame = capture.read()
                 if not ok:
                     break
                 if frame.ndim == 3:
                     frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+                total += frame.nbytes
+                if 2 * total > limit:  # a container that understates its frames
+                    raise DataFormatError(
+                        f"{path}: its frames decode past the limit of {limit / 2**30:.3g} GiB "
+                        f"(VISJAX_MAX_DATA_BYTES) at frame {len(frames)}, although the "
+                        f"container declares {declared}: cut the video, or raise the limit"
+                    )
                 frames.append(frame)
         finally:
             capture.release()

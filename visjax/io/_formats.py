@@ -130,6 +130,10 @@ MAX_DROPPED_FRACTION = 0.5
 command reports as a plain result: above it, most of the estimate rests on held or
 extrapolated frames and the summary should warn."""
 
+MIN_LENGTH_M, MAX_LENGTH_M = 1e-4, 1e4
+"""The plausible range of a known length, m (0.1 mm to 10 km): outside it the length is in
+other units, or a typo, and every depth and velocity would be off by as much."""
+
 _INTRINSICS_TOL = 1e-9  # relative: the last row (0, 0, 1) and the zero below the diagonal
 _NPY_MAGIC = b"\x93NUMPY"
 
@@ -414,6 +418,25 @@ def _declared_unit(path, arrays: dict) -> bool:
     return True
 
 
+def _declared_missing(path, arrays: dict) -> None:
+    """A file's `missing_value` key (a number: the mark its exporter writes for a lost
+    feature, e.g. 0 or -1): every pixel observation with both coordinates equal to it
+    becomes NaN (a feature out of view), and the key is dropped."""
+    if "missing_value" not in arrays:
+        return
+    mark = arrays.pop("missing_value")
+    if mark.shape != () or mark.dtype.kind not in "iuf" or not np.isfinite(mark):
+        raise DataFormatError(
+            f"{path}: `missing_value` must be one finite number (the mark of a lost feature, "
+            f"e.g. 0); got {mark.tolist()!r}."
+        )
+    for key in ("pixels", "reference_pixels"):
+        if key in arrays:
+            p = np.asarray(arrays[key], np.float64)
+            lost = np.all(p == float(mark), axis=-1)
+            arrays[key] = np.where(lost[..., None], np.nan, p)
+
+
 def _check_observations(seen, extra: int = 0, what: str = "feature") -> None:
     """Every column of `seen` (N, n) true in at least `MIN_OBSERVATIONS - extra` rows."""
     counts = np.sum(seen, axis=0) + extra
@@ -450,7 +473,7 @@ class _Format:
         known = [f.name for f in fields(cls)]
         with _open_npz(path) as zf:
             keys = _npz_keys(path, zf)
-            unknown = [k for k in keys if k not in known]
+            unknown = [k for k in keys if k not in known and k != "missing_value"]
             if unknown:
                 named = ", ".join(
                     f"`{k}`"
@@ -461,7 +484,7 @@ class _Format:
                 )
                 raise DataFormatError(
                     f"{path}: unknown key{'s' if len(unknown) > 1 else ''} {named}; the "
-                    f"{cls.NAME} format's keys are {', '.join(known)}."
+                    f"{cls.NAME} format's keys are {', '.join(known)} (and missing_value)."
                 )
             missing = [k for k in cls.REQUIRED if k not in keys]
             if missing:
@@ -471,6 +494,7 @@ class _Format:
                 )
             arrays = _read_members(path, zf, keys)
         _declared_unit(path, arrays)
+        _declared_missing(path, arrays)
         data = cls(**arrays)
         try:
             data.validate()
@@ -521,6 +545,40 @@ class _Format:
             v = getattr(self, key)
             if v is not None and not np.all(np.isfinite(v)):
                 raise DataFormatError(f"`{key}` must be finite (NaN is allowed in pixels only).")
+
+    def _pixels_in_image(self, A, *keys):
+        """Pixels inside the image that the intrinsics imply, [0, 2 c] for a principal
+        point c (a pinhole camera's principal point lies near the image's centre), and no
+        observation exactly at (0, 0): a tracker's or an exporter's mark for a lost
+        feature, which a file must declare (`missing_value`), not pass off as a pixel."""
+        A = np.asarray(A, float)
+        top = 2.0 * np.array([A[0, 2], A[1, 2]])
+        for key in keys:
+            v = getattr(self, key)
+            if v is None:
+                continue
+            p = np.asarray(v, float)
+            seen = np.all(np.isfinite(p), axis=-1)
+            if not seen.any():
+                continue
+            q = p[seen]
+            if np.any(np.all(q == 0.0, axis=-1)):
+                count = int(np.sum(np.all(q == 0.0, axis=-1)))
+                raise DataFormatError(
+                    f"`{key}` holds {count} observation(s) at exactly (0, 0): the mark of a "
+                    "lost feature in many exports, not a pixel; give lost features as NaN, or "
+                    "declare the mark with the key missing_value (e.g. missing_value=0)."
+                )
+            low = q.min(axis=0)
+            high = q.max(axis=0)
+            if np.any(low < 0.0) or np.any(high > top):
+                axis = int(np.argmax((low < 0.0) | (high > top)))
+                name = "uv"[axis]
+                raise DataFormatError(
+                    f"`{key}`'s {name} coordinates span {low[axis]:.6g} to {high[axis]:.6g} px, "
+                    f"outside the image the intrinsics imply (0 to {top[axis]:.6g} px: twice "
+                    "the principal point): mirrored, offset or in other units than pixels?"
+                )
 
     def _times(self, key="t"):
         t = np.asarray(getattr(self, key))
@@ -587,6 +645,12 @@ class VelocityData(_Format):
             )
         if not length > 0:
             raise DataFormatError(f"`known_length[2]` (metres) must be positive; got {length}.")
+        if not MIN_LENGTH_M <= length <= MAX_LENGTH_M:
+            raise DataFormatError(
+                f"`known_length[2]` is {length:g} m, outside the plausible {MIN_LENGTH_M:g} to "
+                f"{MAX_LENGTH_M:g} m: metres, not millimetres or another unit?"
+            )
+        self._pixels_in_image(self.A, "pixels", "reference_pixels")
         ref = self.pixels[0] if self.reference_pixels is None else self.reference_pixels
         if not np.all(np.isfinite(ref)):
             raise DataFormatError(
@@ -642,6 +706,16 @@ class MovingPointData(_Format):
             raise DataFormatError("`D` must be a nonzero direction.")
         if not np.all(np.isfinite(np.asarray(self.pixels)[0])):
             raise DataFormatError("the first frame must show the point (`pixels[0]` finite).")
+        self._pixels_in_image(self.A, "pixels")
+        if self.position is not None:
+            z = np.asarray(self.position, float)[:, 2]
+            if np.any(z <= 0.0):
+                k = int(np.argmax(z <= 0.0))
+                raise DataFormatError(
+                    f"`position` (the truth, in the camera frame) is behind the camera at "
+                    f"frame {k} (z = {z[k]:.6g} m): a point the camera sees has z > 0; "
+                    "another frame or sign convention?"
+                )
         if np.asarray(self.camera_t)[0] > np.asarray(self.t)[0]:
             raise DataFormatError(
                 "the camera velocity must be known from the first frame on: `camera_t[0]` > `t[0]`."
@@ -712,6 +786,7 @@ class StaticPointsData(_Format):
             if not _rotation_ok(getattr(self, key)):
                 raise DataFormatError(f"`{key}` must hold rotation matrices.")
         _check_intrinsics(self.A_nominal, "A_nominal")
+        self._pixels_in_image(self.A_nominal, "pixels")
         _check_observations(self._seen())
 
     @property
@@ -806,6 +881,13 @@ def load_tracks_csv(path, n_features: int | None = None, time_unit: str | None =
         _check_time_units(t, "t", declared=time_unit is not None)
     except DataFormatError as e:
         raise DataFormatError(f"{path}: {e}") from None
+    need = t.shape[0] * n * 2 * 8  # the (N, n, 2) float64 pixels, before any allocation
+    if need > max_data_bytes():
+        raise DataFormatError(
+            f"{path}: {t.shape[0]} times x {n} features (the largest feature index + 1) make "
+            f"a {_size(need)} pixel array, above the limit of {_size(max_data_bytes())} "
+            "(VISJAX_MAX_DATA_BYTES); number the features 0 to n - 1"
+        )
     pixels = np.full((t.shape[0], n, 2), np.nan)
     pixels[k, idx] = uv
     return t, pixels

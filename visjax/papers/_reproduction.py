@@ -3,8 +3,11 @@ lines (`Reproduction`); the files to write go to a `write` callback as `visjax.i
 as they are ready. The reproductions compute; the report writes and prints."""
 
 import dataclasses
+import time
 
 import numpy as np
+
+from ..studies import StudyTooLong
 
 
 @dataclasses.dataclass(frozen=True)
@@ -30,6 +33,32 @@ def check_seeds(seeds, noise) -> None:
         raise ValueError(
             f"{seeds} seeds need pixel noise (`noise` > 0): noise-free runs are all the same."
         )
+
+
+class SeedClock:
+    """The time of a loop over `runs` noise seeds, checked as it goes: after the second
+    run (the first that reuses the compiled program), a loop estimated to take longer than
+    `max_hours` in all is refused (`visjax.studies.StudyTooLong`, naming the estimate),
+    before the rest of the runs; call `tick()` after each run."""
+
+    def __init__(self, runs: int, max_hours: float, what: str):
+        self.runs, self.max_hours, self.what = int(runs), float(max_hours), what
+        self.started = time.perf_counter()
+        self.marks: list[float] = []
+
+    def tick(self) -> None:
+        self.marks.append(time.perf_counter())
+        if len(self.marks) != 2 or self.runs <= 2:
+            return
+        first = self.marks[0] - self.started
+        each = self.marks[1] - self.marks[0]
+        total = first + each * (self.runs - 1)
+        if total > 3600.0 * self.max_hours:
+            raise StudyTooLong(
+                f"{self.what}: {self.runs} runs estimated at {total / 3600:.3g} h ({each:.3g} s "
+                f"each after the first), past --max-hours {self.max_hours:g}: use fewer "
+                "--seeds, a shorter --duration, or raise --max-hours"
+            )
 
 
 def median(rows) -> list:

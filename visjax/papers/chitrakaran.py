@@ -53,7 +53,7 @@ from ..sim import (
     sinusoidal_trajectory,
     view,
 )
-from ._reproduction import Reproduction, check_seeds, median, stages
+from ._reproduction import Reproduction, SeedClock, check_seeds, median, stages
 
 A_EQ62 = ((1268.16, 0.0, 257.49), (0.0, 1267.50, 253.10), (0.0, 0.0, 1.0))
 R_STAR_EQ61 = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
@@ -416,6 +416,7 @@ def velocity_reproduction(
     rho=None,
     quiet=True,
     write=None,
+    max_hours: float = 24.0,
 ) -> Reproduction:
     """Section 6 (`velocity_experiment`, `summarise`) as `visjax velocity` reports it: RMS
     and max error per DOF over the scoring window, `estimate.npz` (`t`, `v_hat`,
@@ -438,8 +439,10 @@ def velocity_reproduction(
         bar.set_postfix_str(stage)
 
     runs = []
+    clock = SeedClock(seeds, max_hours, "velocity")  # `StudyTooLong` after the second seed
     for i in range(seeds):
         if i:
+            clock.tick()
             progress(f"seed {seed + i}")
         runs.append(
             velocity_experiment(

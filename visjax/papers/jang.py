@@ -57,7 +57,7 @@ from ..estimators import (
 )
 from ..io import Outputs
 from ..sim import add_pixel_noise, hold_indices, moving_camera_point, sample_times
-from ._reproduction import Reproduction, check_seeds, floats, median
+from ._reproduction import Reproduction, SeedClock, check_seeds, floats, median
 
 KC_TOOLBOX = ((560.98005, 0.0, 303.91196), (0.0, 749.53852, 345.99906), (0.0, 0.0, 1.0))
 KC_REFINED = ((551.9794, 0.0, 304.0282), (0.0, 737.5125, 331.5052), (0.0, 0.0, 1.0))
@@ -835,6 +835,7 @@ def structure_reproduction(
     seeds: int = 1,
     quiet=True,
     write=None,
+    max_hours: float = 24.0,
 ) -> Reproduction:
     """The UIO on the simulated analogues of the sets (`structure_experiment`), as `visjax
     structure` reports it: per set the RMS position error beside the thesis' Tables
@@ -853,8 +854,12 @@ def structure_reproduction(
     check_seeds(seeds, noise_px)
     names = set_names(sets)
     per_set = {}
+    clock = SeedClock(len(names) * seeds, max_hours, "moving_point")
     for name in tqdm(names, desc="structure", unit="set", disable=quiet):
-        runs = [structure_experiment(name, duration, noise_px, seed=seed + i) for i in range(seeds)]
+        runs = []
+        for i in range(seeds):
+            runs.append(structure_experiment(name, duration, noise_px, seed=seed + i))
+            clock.tick()
         r = runs[0]
         rms = [[float(x) for x in run.rms] for run in runs]
         per_set[name] = {"rms": rms[0] if seeds == 1 else median(rms)}

@@ -42,7 +42,7 @@ from ..sim import (
     sample_times,
     view,
 )
-from ._reproduction import Reproduction, check_seeds, median, stages
+from ._reproduction import Reproduction, SeedClock, check_seeds, median, stages
 
 
 @final
@@ -132,7 +132,6 @@ def _scenario(ts, exciting):
     p_c = view(rig, points_in_camera(rig, omega_c, body))
     t1, t2 = camera_parameters(A, R_c, x_c)
     return R_b, x_b, p_s, p_c, omega_c, omega_s, A, R_c, x_c, t1, t2
-
 
 
 def nominal_camera() -> tuple[Float[Array, "3 3"], Float[Array, "3 3"], Float[Array, "3"]]:
@@ -258,6 +257,7 @@ def euclidean_reproduction(
     seeds: int = 1,
     quiet=True,
     write=None,
+    max_hours: float = 24.0,
 ) -> Reproduction:
     """The adaptive least-squares structure estimator on its simulation
     (`euclidean_experiment`), as `visjax static_points` reports it: the final position errors,
@@ -273,8 +273,10 @@ def euclidean_reproduction(
     bar = stages(1 + seeds, "euclidean", quiet)
     bar.set_postfix_str("simulate and estimate (compiles once)")
     runs = []
+    clock = SeedClock(seeds, max_hours, "static_points")
     for i in range(seeds):
         runs.append(euclidean_experiment(duration, noise_px, seed=seed + i))
+        clock.tick()
         bar.update()
     r = (
         runs[0]
