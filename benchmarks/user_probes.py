@@ -208,7 +208,20 @@ def _lines(text: str) -> list[str]:
     return [ln.strip() for ln in re.split(r"[\r\n]", text or "") if ln.strip()]
 
 
+def _user_code_error(err: str) -> bool:
+    """One `visjax: error:` line that says the error is in the user's own code, first,
+    then that code's traceback (issue 44: their traceback helps them)."""
+    lines = _lines(err)
+    return (
+        bool(lines)
+        and lines[0].startswith("visjax: error:")
+        and lines[0].endswith("(your code's traceback below)")
+    )
+
+
 def crashed(rc, err: str) -> bool:
+    if _user_code_error(err):  # the traceback is the user's code's, announced as such
+        return rc is not None and rc not in OK_EXITS
     return "Traceback" in (err or "") or (rc is not None and rc not in OK_EXITS)
 
 
@@ -216,6 +229,8 @@ def clear_error(err: str) -> bool:
     """Exactly one `visjax: error:` / `visjax: interrupted` line, among the last three
     non-empty lines (a progress bar's last redraw may follow it), no traceback."""
     lines = _lines(err)
+    if _user_code_error(err):
+        return sum(ln.startswith("visjax: error:") for ln in lines) == 1
     said = [ln for ln in lines if ln.startswith(("visjax: error:", "visjax: interrupted"))]
     return len(said) == 1 and said[0] in lines[-3:] and "Traceback" not in err
 
@@ -311,6 +326,8 @@ def _walk(tree, found: list[str], where="") -> None:
                 found.append(f"{here} = {v}")
             elif k == "dropped_fraction" and isinstance(v, float) and v > MAX_DROPPED_FRACTION:
                 found.append(f"{here} = {v:.3f}")
+            elif k == "worse_than_trivial" and isinstance(v, dict) and any(v.values()):
+                found.append(f"{here} = {v}")
             else:
                 _walk(v, found, here)
     elif isinstance(tree, list):
@@ -1267,6 +1284,353 @@ def _killed_then_rerun(folder):
 
 
 # --- the driver --------------------------------------------------------------------------------
+
+
+# 6. the second pass (issue 44): deletions, verified parts, the newer commands
+
+
+def _plain_snapshot(folder: Path) -> dict[str, str]:
+    """Every file under `folder` with its digest, manifests or not (a forged manifest must
+    not make the user's files look like a command's)."""
+    files = {}
+    for path in folder.rglob("*"):
+        if path.is_file() and not path.is_symlink() and ".visjax-stage-" not in str(path):
+            files[str(path.relative_to(folder))] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return files
+
+
+def _forged_manifest(entries, *, command="velocity"):
+    """`out/.visjax-outputs.json` listing `entries` (left by anyone); the user's files
+    beside `out` and in it; then `velocity --data` into `out`: nothing of the user's goes."""
+
+    def run(folder):
+        save(folder / "data.npz", data("v"))
+        (folder / "keep.txt").write_text("beside --out\n")
+        _user_files(folder / "out")
+        (folder / "out" / "data.npz").write_bytes((folder / "data.npz").read_bytes())
+        record = {"command": command, "entries": entries}
+        (folder / "out" / ".visjax-outputs.json").write_text(json.dumps(record))
+        before = _plain_snapshot(folder)
+        rc, out, err = visjax(data_cmd("v"), folder)
+        after = _plain_snapshot(folder)
+        lost = [k for k, v in before.items() if after.get(k) != v and "visjax-outputs" not in k]
+        problems = [f"the user's file {k} was deleted or changed" for k in lost]
+        return Outcome(rc, out, err, problems, crashed(rc, err))
+
+    return run
+
+
+PROBES += [
+    Probe("out_manifest_lists_dotdot", "out_manifest", _forged_manifest([".."]), False),
+    Probe("out_manifest_lists_dot", "out_manifest", _forged_manifest(["."]), False),
+    Probe(
+        "out_manifest_lists_paths",
+        "out_manifest",
+        _forged_manifest(["../keep.txt", "/etc", "analysis/fit.py"]),
+        False,
+    ),
+    Probe("out_manifest_lists_users_file", "out_manifest", _forged_manifest(["data.npz"]), False),
+]
+
+PD_PLANAR = ["sweep", "point-depth", "--set", "planar", "--duration", "0.05", *PD]
+
+
+def _users_variant_folder(link: bool, force: bool):
+    """The user's own `planar/` (a folder, or a link to one elsewhere) in `--out` where a
+    sweep writes its parts: refused before any work, nothing of the user's touched."""
+
+    def run(folder):
+        out = folder / "out"
+        out.mkdir()
+        mine = folder / "mine" if link else out / "planar"
+        (mine / "parts").mkdir(parents=True)
+        (mine / "notes.txt").write_text("mine\n")
+        (mine / "parts" / "part-0000000.parquet").write_text("my own file of that name\n")
+        if link:
+            (out / "planar").symlink_to(mine, target_is_directory=True)
+        before = _plain_snapshot(folder)
+        argv = [*PD_PLANAR, "--out", "out", "--quiet", *(["--force"] if force else [])]
+        rc, o, err = visjax(argv, folder)
+        after = _plain_snapshot(folder)
+        lost = [k for k, v in before.items() if after.get(k) != v]
+        problems = [f"the user's file {k} was deleted or changed" for k in lost]
+        return Outcome(rc, o, err, problems, crashed(rc, err))
+
+    return run
+
+
+PROBES += [
+    Probe("sweep_users_variant_folder", "out_user_folder", _users_variant_folder(False, False)),
+    Probe(
+        "sweep_users_variant_folder_force", "out_user_folder", _users_variant_folder(False, True)
+    ),
+    Probe(
+        "sweep_variant_folder_is_a_link_force", "out_user_folder", _users_variant_folder(True, True)
+    ),
+]
+
+
+def _copy_part(parts, folder):
+    (parts / "part-0000001.parquet").write_bytes((parts / "part-0000000.parquet").read_bytes())
+
+
+def _truncate_part(parts, folder):
+    data_ = (parts / "part-0000000.parquet").read_bytes()
+    (parts / "part-0000000.parquet").write_bytes(data_[: len(data_) // 2])
+
+
+def _drop_identity(parts, folder):
+    m = json.loads((parts / "manifest.json").read_text())
+    del m["identity"]
+    (parts / "manifest.json").write_text(json.dumps(m))
+
+
+def _corrupt_manifest(parts, folder):
+    (parts / "manifest.json").write_text('{"identity": "abc", "done": [0, ')
+
+
+RESUME = [*PD_PLANAR, "--chunk", "1", "--out", "out", "--quiet", "--resume"]
+PD_PLANAR_C1 = [*PD_PLANAR, "--chunk", "1"]
+MERGE = ["merge", "out/planar/parts", "--out", "merged", "--quiet"]
+
+
+def _sweep_then_c1(alter, then):
+    def run(folder):
+        rc, o, err = visjax([*PD_PLANAR_C1, "--out", "out", "--quiet"], folder)
+        if rc != 0 or crashed(rc, err):
+            return Outcome(rc, o, err, [f"the first sweep failed: exit {rc}"], crashed(rc, err))
+        return _after(folder, alter, then)
+
+    return run
+
+
+def _after(folder, alter, then):
+    import pyarrow.parquet as pq
+
+    before = pq.read_table(folder / "out" / "planar" / "runs.parquet").to_pandas()
+    alter(folder / "out" / "planar" / "parts", folder)
+
+    def check(f, rc, out, err):
+        if then[0] != "sweep" or rc != 0:
+            return []
+        after = pq.read_table(f / "out" / "planar" / "runs.parquet").to_pandas()
+        return [] if after.equals(before) else ["the resumed table differs from the whole one"]
+
+    return command_probe(lambda f: then, check=check)(folder)
+
+
+PROBES += [
+    Probe(
+        "resume_part_copied_over_another",
+        "parts_verified",
+        _sweep_then_c1(_copy_part, RESUME),
+        False,
+    ),
+    Probe("resume_truncated_part", "parts_verified", _sweep_then_c1(_truncate_part, RESUME), False),
+    Probe("merge_part_copied_over_another", "parts_verified", _sweep_then_c1(_copy_part, MERGE)),
+    Probe("merge_truncated_part", "parts_verified", _sweep_then_c1(_truncate_part, MERGE)),
+    Probe(
+        "merge_manifest_missing_identity", "parts_verified", _sweep_then_c1(_drop_identity, MERGE)
+    ),
+    Probe("resume_corrupt_manifest", "parts_verified", _sweep_then_c1(_corrupt_manifest, RESUME)),
+]
+
+
+_USER_MODULE = """
+import jax.numpy as jnp
+from visjax import studies
+import sys
+sys.path.insert(0, {root!r})
+from tests.studies.slow_toy import slow_toy
+
+studies.register_problem(
+    "pathlike", lambda *, noise_px=0.1, variant=None: slow_toy(noise_px=noise_px),
+    variants=("a/b", "/abs", "../up"),
+)
+"""
+
+
+@probe("variant_names_like_paths", "output_names", mistake=False)
+def _variant_paths(folder):
+    (folder / "mine.py").write_text(_USER_MODULE.format(root=str(ROOT)))
+    sets = ["--set", "a/b", "--set", "/abs", "--set", "../up"]
+    argv = ["--import", "mine", "compare", "pathlike", *sets, "--seeds", "1", "--quiet"]
+    before = set(p.name for p in folder.iterdir())
+    rc, out, err = visjax([*argv, "--out", "out"], folder)
+    outside = sorted(set(p.name for p in folder.iterdir()) - before - {"out", "__pycache__"})
+    problems = [f"written outside --out: {outside}"] if outside else []
+    if rc == 0 and not (folder / "out" / "a_b" / "summary.json").exists():
+        problems.append("no out/a_b/summary.json")
+    return Outcome(rc, out, err, problems, crashed(rc, err))
+
+
+for name, source in (
+    ("import_module_not_found", None),
+    ("import_module_does_not_parse", "def broken(:\n"),
+    ("import_module_raises", "raise RuntimeError('my module is broken')\n"),
+    (
+        "import_builder_raises",
+        "from visjax import studies\n"
+        "def build(*, noise_px=0.1):\n    return 1 / 0\n"
+        "studies.register_problem('zero', build)\n",
+    ),
+):
+
+    def build(folder, source=source):
+        if source is not None:
+            (folder / "usermod.py").write_text(source)
+        return ["--import", "usermod", "run", "zero", "--quiet", "--out", "out"]
+
+    PROBES.append(Probe(name, "import", command_probe(build)))
+
+
+_PLUGIN = """Metadata-Version: 2.1
+Name: brokenplugin
+Version: 0.1
+"""
+
+
+def _plugin_env(folder: Path) -> dict:
+    """A folder on PYTHONPATH holding an installed distribution's metadata whose
+    `visjax.problems` entry point names a module that does not import."""
+    site = folder / "site"
+    info = site / "brokenplugin-0.1.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(_PLUGIN)
+    (info / "entry_points.txt").write_text(
+        "[visjax.problems]\nbroken = nosuch_plugin_module:build\n"
+    )
+    path = os.pathsep.join([str(site), str(ROOT)])
+    return {"PYTHONPATH": path}
+
+
+@probe("plugin_broken_other_commands", "plugin", mistake=False)
+def _plugin_others(folder):
+    rc, out, err = visjax(["--version"], folder, _plugin_env(folder))
+    problems = [] if rc == 0 and "visjax" in out else [f"--version: exit {rc}"]
+    rc2, out2, err2 = visjax(
+        ["run", "--help"],
+        folder,
+        {"PYTHONPATH": os.pathsep.join([str(folder / "site"), str(ROOT)])},
+    )
+    problems += [] if rc2 == 0 else [f"run --help: exit {rc2}"]
+    return Outcome(rc, out, err + err2, problems, crashed(rc, err) or crashed(rc2, err2))
+
+
+@probe("plugin_broken_named", "plugin")
+def _plugin_named(folder):
+    rc, out, err = visjax(["run", "broken", "--quiet"], folder, _plugin_env(folder))
+    return Outcome(rc, out, err, [], crashed(rc, err))
+
+
+def _closed_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@probe("sweep_ray_closed_port", "ray")
+def _ray_closed(folder):
+    argv = [*PD_PLANAR, "--ray", f"127.0.0.1:{_closed_port()}", "--out", "out", "--quiet"]
+    rc, out, err = visjax(argv, folder, timeout=120)
+    return Outcome(rc, out, err, [], crashed(rc, err))
+
+
+for name, argv in (
+    ("sweep_seed_2_64", [*PD_PLANAR, "--seed", "18446744073709551616"]),
+    ("sweep_seed_2_63_minus_1", [*PD_PLANAR, "--seed", "9223372036854775807"]),
+    ("tune_seed_2_63", ["tune", "point-depth", *PD, "--seed", "9223372036854775808"]),
+    (
+        "velocity_seeds_1e6",
+        [
+            "velocity",
+            "--duration",
+            "0.1",
+            "--noise",
+            "0.1",
+            "--seeds",
+            "1000000",
+            "--max-hours",
+            "0.01",
+        ],
+    ),
+):
+    argv_probe(name, "seeds_range", argv)
+
+
+def _uint64_ns(a):
+    n = a["t"].shape[0]
+    a["t"] = np.iinfo(np.uint64).max - np.arange(n, dtype=np.uint64)[::-1] * np.uint64(1_000_000)
+    a["time_unit"] = np.asarray("ns")
+
+
+def _int_zero_marks(a):
+    p = np.round(a["pixels"]).astype(np.int32)
+    p[10::7, 2] = 0
+    a["pixels"] = p
+
+
+def _missing_two_percent(a):
+    rng = np.random.default_rng(0)
+    lost = rng.random(a["pixels"].shape[:2]) < 0.02
+    lost[0] = False
+    a["pixels"] = np.where(lost[..., None], np.nan, a["pixels"])
+
+
+def _collinear_from(k):
+    def mutate(a):
+        p = a["pixels"]
+        p[k:, :, 1] = p[k:, :1, 1]  # every feature on one horizontal line
+
+    return mutate
+
+
+def _behind(a):
+    a["position"] = a["position"] * np.array([1.0, 1.0, -1.0])
+
+
+data_probe("velocity_time_ns_near_uint64_limit", "times_exact", "v", _uint64_ns)
+data_probe(
+    "velocity_known_length_1e300",
+    "plausibility",
+    "v",
+    lambda a: a["known_length"].__setitem__(2, 1e300),
+)
+data_probe(
+    "velocity_known_length_1e-300",
+    "plausibility",
+    "v",
+    lambda a: a["known_length"].__setitem__(2, 1e-300),
+)
+data_probe("velocity_int_pixels_zero_marks", "plausibility", "v", _int_zero_marks)
+data_probe("euclidean_int_pixels_zero_marks", "plausibility", "e", _int_zero_marks)
+data_probe(
+    "velocity_pixels_mirrored", "plausibility", "v", lambda a: a.__setitem__("pixels", -a["pixels"])
+)
+data_probe(
+    "euclidean_pixels_mirrored",
+    "plausibility",
+    "e",
+    lambda a: a.__setitem__("pixels", -a["pixels"]),
+)
+data_probe("structure_truth_behind_camera", "plausibility", "s", _behind)
+data_probe("velocity_example_noise_and_dropouts", "quality", "v", _missing_two_percent)
+data_probe("velocity_collinear_from_frame_100", "quality", "v", _collinear_from(100))
+data_probe("velocity_K_2e6", "quality", "v", _set("K", np.full(6, 2e6)))
+argv_probe(
+    "compare_velocity_noise_0_5",
+    "quality",
+    ["compare", "velocity", "--duration", "0.5", "--noise", "0.5", "--seeds", "2"],
+)
+
+
+@probe("track_npz_fps_1e-9", "track_fps")
+def _track_slow(folder):
+    np.savez(folder / "video.npz", frames=BASE["frames"], fps=1e-9)
+    rc, out, err = visjax(["track", "video.npz", "--out", "tracks.csv", "--quiet"], folder)
+    return Outcome(rc, out, err, [], crashed(rc, err))
 
 
 def _tail(text: str, n: int = 800) -> str:

@@ -319,6 +319,8 @@ def run_command(
         failed_sample = int(np.asarray(getattr(sol, "failed_sample", -1)))
         values = jax.tree_util.tree_map(np.asarray, p.metrics(m, sol))
         ok = code == "successful" and all(np.all(np.isfinite(v)) for v in values.values())
+        if code == "successful" and not ok:  # a metric that is NaN: not a success
+            code = "nonfinite_output"
         head = f"[{tag}] " if tag else ""
         failure = None
         if code != "successful":

@@ -1,6 +1,6 @@
 """Every EKF of visjax against dynamax's extended Kalman filter (an independent
 implementation; dynamax is a test dependency only): the same model, run by both on the
-same inputs, gives the same filtered means and covariances to 1e-9.
+same inputs, gives the same filtered means (to 1e-9) and covariances (to 5e-9).
 
 Compared, each on a short noisy run (40 samples) of a scene the baselines' own tests use:
 a hand-written pendulum (the generic `extended_kalman_filter`, non-uniform sample times,
@@ -40,8 +40,8 @@ Conventions matched (read in dynamax 1.0.3's `nonlinear_gaussian_ssm/inference_e
   express it.
 
 Tolerance, per sample and entry, relative to the filter's own scale: means
-`|x - x_dmx| <= 1e-9 (|x| + sqrt(P_ii))`, covariances `|P - P_dmx|_ij <= 1e-9 sqrt(P_ii
-P_jj)` (visjax's `P`).
+`|x - x_dmx| <= 1e-9 (|x| + sqrt(P_ii))`, covariances `|P - P_dmx|_ij <= 5e-9 sqrt(P_ii
+P_jj)` (visjax's `P`; the two covariance updates round differently, `TOL_P`).
 """
 
 import functools
@@ -80,6 +80,10 @@ from visjax.sim import (
 )
 
 TOL = 1e-9
+# covariances: dynamax's standard update `P - K S K^T` and visjax's Joseph form round
+# differently, more so as the filter grows confident: 3e-10 on the static-points filter
+# with jax 0.4, 1.3e-9 with jax 0.10 (XLA's CPU fusions changed); means stay within TOL
+TOL_P = 5e-9
 N = 40
 
 
@@ -200,7 +204,7 @@ def assert_same(name, model, ts, zs, us, x0, P0, present, x, P):
     x_d, P_d, dQ, dR = dynamax_side(model, ts, zs, us, x0, P0, present, x)
     ex, eP, raw_x, raw_P = scaled_differences(x, P, x_d, P_d)
     print(f"\n{name}: means {ex:.1e} (raw {raw_x:.1e}), covariances {eP:.1e} (raw {raw_P:.1e})")
-    assert ex <= TOL and eP <= TOL, (ex, eP)
+    assert ex <= TOL and eP <= TOL_P, (ex, eP)
     assert dQ == 0.0 and dR == 0.0, (dQ, dR)
     # the run is not trivial: the means and covariances move far more than the tolerance
     sd0 = np.sqrt(np.diag(np.asarray(P0)))

@@ -31,7 +31,7 @@ def _rotations(n):
 
 
 def _velocity(N=20, n=6):
-    pixels = RNG.uniform(0, 600, (N, n, 2))
+    pixels = RNG.uniform(1, 479, (N, n, 2))
     pixels[3, 2] = np.nan  # a feature out of view
     return VelocityData(
         t=np.arange(N) * 1e-3,
@@ -47,19 +47,19 @@ def _velocity(N=20, n=6):
 def _structure(N=20, M=70):
     return MovingPointData(
         t=np.arange(N) / 50.0,
-        pixels=RNG.uniform(0, 600, (N, 2)),
+        pixels=RNG.uniform(1, 479, (N, 2)),
         A=np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]]),
         camera_t=np.arange(M) / 200.0,
         camera_velocity=RNG.normal(size=(M, 6)),
         D=np.array([1.0, 0.0, 0.0]),
-        position=RNG.normal(size=(N, 3)),
+        position=RNG.normal(size=(N, 3)) + np.array([0.0, 0.0, 5.0]),  # in front
     )
 
 
 def _euclidean(N=20, n=8, k=5):
     return StaticPointsData(
         t=np.arange(N) * 1e-3,
-        pixels=RNG.uniform(0, 600, (N, n, 2)),
+        pixels=RNG.uniform(1, 479, (N, n, 2)),
         platform_R=_rotations(N),
         platform_x=RNG.normal(size=(N, 3)),
         known_features=RNG.normal(size=(k, 3)),

@@ -130,9 +130,12 @@ MAX_DROPPED_FRACTION = 0.5
 command reports as a plain result: above it, most of the estimate rests on held or
 extrapolated frames and the summary should warn."""
 
-MIN_LENGTH_M, MAX_LENGTH_M = 1e-4, 1e4
-"""The plausible range of a known length, m (0.1 mm to 10 km): outside it the length is in
-other units, or a typo, and every depth and velocity would be off by as much."""
+MIN_LENGTH_M = 1e-4
+"""The shortest plausible known length, m (0.1 mm): shorter is in other units, or a typo,
+and every depth and velocity would be off by as much."""
+
+MAX_LENGTH_M = 1e4
+"""The longest plausible known length, m (10 km)."""
 
 _INTRINSICS_TOL = 1e-9  # relative: the last row (0, 0, 1) and the zero below the diagonal
 _NPY_MAGIC = b"\x93NUMPY"

@@ -41,8 +41,9 @@ _DATA_RESULT = (
 )
 _DROPPED = (
     "float",
-    "the fraction of the file's frames with a feature missing (`dropped_fraction()`); "
-    "always written (absent only from summaries of earlier versions)",
+    "the fraction of the file's frames with a feature missing (`dropped_fraction()`), or, "
+    "where more, of the frames the estimator held (features degenerate, or not those of "
+    "the frames before); always written (absent only from summaries of earlier versions)",
 )
 _DROPPED_STUDY = (
     "float",

@@ -92,12 +92,14 @@ def _failure(sol, t) -> tuple[str, int, str | None]:
 
 
 def coverage_line(fraction: float, frames: int) -> str:
-    """`frames with a feature missing: 1500 of 2000 (75.0%)`, and past
+    """`frames with a feature missing or held: 1500 of 2000 (75.0%)` (held: a frame the
+    estimator could not use, its features degenerate or not those of the frames before),
+    and past
     `visjax.io.MAX_DROPPED_FRACTION` what that makes of the result."""
     from ..io import MAX_DROPPED_FRACTION
 
     missing = int(round(fraction * frames))
-    line = f"frames with a feature missing: {missing} of {frames} ({fraction:.1%})"
+    line = f"frames with a feature missing or held: {missing} of {frames} ({fraction:.1%})"
     if fraction > MAX_DROPPED_FRACTION:
         line += (
             f", more than visjax.io.MAX_DROPPED_FRACTION ({MAX_DROPPED_FRACTION:.0%}): the "
@@ -126,7 +128,10 @@ def _outcome(command: str, sol, t, data, body: dict) -> str | None:
     from ..io import MAX_DROPPED_FRACTION
 
     code, k, failed = _failure(sol, t)
-    fraction = body["dropped_fraction"] = float(data.dropped_fraction())
+    fraction = float(data.dropped_fraction())
+    if "dropped_frames" in body:  # frames held (a feature missing, or not measurable)
+        fraction = max(fraction, body["dropped_frames"] / max(len(t), 1))
+    body["dropped_fraction"] = fraction
     if failed is not None:
         body["result"], body["failed_sample"] = code, k
         return f"{command}: the run failed: {failed}"
