@@ -306,7 +306,7 @@ def run_command(
 
     from ._results import result_names
     from .report import RunFailed
-    from .studies import as_json, quality, solution
+    from .studies import as_json, quality, quality_line, solution
 
     results, failures = {}, []
     dropped = _dropped(problem, data)
@@ -332,7 +332,7 @@ def run_command(
         judged = quality(p, values) if ok else None
         if failure is None and judged is not None and judged["flag"] != "ok":
             code = judged["flag"]
-            failure = f"run {problem}: {head}the result is {code}: {_quality_line(judged)}"
+            failure = f"run {problem}: {head}the result is {code}: {quality_line(judged)}"
         body = {
             "problem": p.title,
             "method": m,
@@ -348,7 +348,7 @@ def run_command(
             body["quality"] = judged
         print(f"{head}{p.title}: {m}, {code}")
         if judged is not None:
-            print(f"{head}  quality: {_quality_line(judged)}")
+            print(f"{head}  quality: {quality_line(judged)}")
         if dropped is not None:
             print(f"{head}  {dropped['line']}")
         for k, v in body["metrics"].items():
@@ -402,17 +402,6 @@ def _judge_records(problem, records: list, body: dict) -> dict | None:
         "worse_than_trivial": counts,
     }
     return counts
-
-
-def _quality_line(judged: dict) -> str:
-    """`studies.quality`'s verdict as one line."""
-    ratio = judged["ratio_to_trivial"]
-    times = "not finite" if ratio is None else f"{ratio:.3g} times"
-    verdict = "no better than" if judged["flag"] != "ok" else "below"
-    return (
-        f"{judged['metric']} is {times} that of {judged['trivial_estimate']} "
-        f"({judged['trivial']:.4g}): {verdict} it (threshold {judged['threshold']:g})"
-    )
 
 
 def _dropped(problem, data) -> dict | None:

@@ -219,33 +219,19 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
 
 def _quality(rms, trivial, what: str) -> dict:
     """The run's error against the trivial estimate's over the same window, as
-    `visjax.studies.quality` judges a problem's run: the worst component of each, their
-    ratio, per component too, and the flag at `QUALITY_RATIO`."""
-    from ..studies import QUALITY_RATIO
+    `visjax.studies.judge` judges a problem's run: the worst component of each (the
+    problem's `rms_worst`), and the ratio per component (`ratios`)."""
+    from ..studies import judge
 
-    worst, base = max(rms), max(trivial)
-    ratio = worst / base if base > 0 else float("inf")
-    worse = not np.isfinite(ratio) or ratio >= QUALITY_RATIO
-    return {
-        "trivial_estimate": what,
-        "metric": "rms_worst",
-        "trivial": base,
-        "ratio_to_trivial": ratio if np.isfinite(ratio) else None,
-        "ratios": [r / t if t > 0 else None for r, t in zip(rms, trivial)],
-        "threshold": QUALITY_RATIO,
-        "flag": "worse_than_trivial" if worse else "ok",
-    }
+    judged = judge(max(rms), max(trivial), trivial_estimate=what, metric="rms_worst")
+    judged["ratios"] = [r / t if t > 0 else None for r, t in zip(rms, trivial)]
+    return judged
 
 
 def _quality_words(body) -> str:
-    q = body["quality"]
-    ratio = q["ratio_to_trivial"]
-    times = "not finite" if ratio is None else f"{ratio:.3g} times"
-    verdict = "no better than it: not to be trusted" if q["flag"] != "ok" else "below it"
-    return (
-        f"the worst RMS error over the second half is {times} that of {q['trivial_estimate']}"
-        f" ({q['trivial']:.4g}): {verdict}"
-    )
+    from ..studies import quality_line
+
+    return quality_line(body["quality"]) + " (over the second half)"
 
 
 def moving_point_from_file(path) -> FileEstimate:

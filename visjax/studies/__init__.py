@@ -24,7 +24,9 @@ from ._problem import (
     evaluate as evaluate,
     fingerprint as fingerprint,
     held as held,
+    judge as judge,
     quality as quality,
+    quality_line as quality_line,
     solution as solution,
 )
 from ._registry import (

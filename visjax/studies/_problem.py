@@ -445,27 +445,44 @@ nothing."""
 
 def quality(problem: AbstractProblem, values: Mapping[str, Any], trivial=None) -> dict | None:
     """How a run's metrics (`values`, as `metrics` returns them) compare with the trivial
-    estimate's (`problem.trivial()`): `{"trivial_estimate", "metric", "trivial",
-    "ratio_to_trivial", "threshold", "flag"}`, `flag` `"worse_than_trivial"` when the
-    headline metric is at least `QUALITY_RATIO` times the trivial one's (or not finite),
-    else `"ok"`; `None` for a problem without a trivial estimate or truth. `trivial`:
+    estimate's (`problem.trivial()`): `judge`'s verdict on the headline metric (its
+    largest entry); `None` for a problem without a trivial estimate or truth. `trivial`:
     `problem.trivial()` computed once (for many runs of one problem)."""
     if trivial is None:
         trivial = problem.trivial() if problem.scored else {}
     if problem.metric not in trivial or problem.metric not in values:
         return None
-    base = float(np.max(np.asarray(trivial[problem.metric], float)))
     value = float(np.max(np.asarray(values[problem.metric], float)))
-    ratio = value / base if base > 0 else float("inf")
+    base = float(np.max(np.asarray(trivial[problem.metric], float)))
+    return judge(value, base, trivial_estimate=problem.trivial_label, metric=problem.metric)
+
+
+def judge(value: float, trivial: float, *, trivial_estimate: str, metric: str) -> dict:
+    """An error `value` against the trivial estimate's error `trivial` (the same metric,
+    over the same data): `{"trivial_estimate", "metric", "trivial", "ratio_to_trivial",
+    "threshold", "flag"}`, `flag` `"worse_than_trivial"` when the ratio is at least
+    `QUALITY_RATIO` (or not finite), else `"ok"`."""
+    ratio = value / trivial if trivial > 0 else float("inf")
     worse = not np.isfinite(ratio) or ratio >= QUALITY_RATIO
     return {
-        "trivial_estimate": problem.trivial_label,
-        "metric": problem.metric,
-        "trivial": base,
-        "ratio_to_trivial": ratio if np.isfinite(ratio) else None,
+        "trivial_estimate": trivial_estimate,
+        "metric": metric,
+        "trivial": float(trivial),
+        "ratio_to_trivial": float(ratio) if np.isfinite(ratio) else None,
         "threshold": QUALITY_RATIO,
         "flag": "worse_than_trivial" if worse else "ok",
     }
+
+
+def quality_line(judged: Mapping[str, Any]) -> str:
+    """`judge`'s verdict as one printed line."""
+    ratio = judged["ratio_to_trivial"]
+    times = "not finite" if ratio is None else f"{ratio:.3g} times"
+    verdict = "no better than it: not to be trusted" if judged["flag"] != "ok" else "below it"
+    return (
+        f"{judged['metric']} is {times} that of {judged['trivial_estimate']} "
+        f"({judged['trivial']:.4g}): {verdict} (threshold {judged['threshold']:g})"
+    )
 
 
 def point_names(problem: AbstractProblem, names: Sequence[str]) -> None:
