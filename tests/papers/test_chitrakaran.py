@@ -27,3 +27,19 @@ def test_noise_and_errors():
         fixed_camera_scenario(0.01, 1000.0, noise_px=1.0)
     with pytest.raises(ValueError, match="at least 2 samples"):
         fixed_camera_scenario(0.0001, 1000.0)
+
+
+def test_the_trivial_estimate_is_zero_velocity():
+    """`VelocityProblem.trivial()` (issue 44's quality check): the RMS of the true
+    velocity over the scoring window, the error of answering zero (a NumPy transcription)."""
+    from visjax import papers
+
+    p = papers.velocity_problem(noise_px=0.5, duration=0.2)  # the smoother tests' problem
+    got = p.trivial()
+    ts, truth = np.asarray(p.ts), np.asarray(p.truth)
+    a, b = (float(ts[0]) + w for w in p.window)
+    inside = (ts >= a) & (ts < b + 1e-9)
+    want = np.sqrt(np.mean(truth[inside] ** 2, axis=0))
+    np.testing.assert_allclose(np.asarray(got["rms"]), want, rtol=1e-12)
+    assert float(got["rms_worst"]) == pytest.approx(want.max(), rel=1e-12)
+    assert p.trivial_label == "zero velocity"

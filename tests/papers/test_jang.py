@@ -62,3 +62,25 @@ def test_uub_case_stays_bounded():
     t = np.asarray(sol.ts)
     last = np.abs(e[t > 15.0, 2]).max()
     assert last < 1.5 * np.abs(e[(t > 5.0) & (t < 15.0), 2]).max()  # no growth: bounded
+
+
+def test_the_trivial_estimate_is_the_depth_guess_on_each_ray():
+    """`MovingPointProblem.trivial()` (issue 44's quality check): the point on each
+    frame's ray at the observer's initial depth guess, scored as the baselines are: a
+    NumPy transcription over the same window."""
+    from visjax import studies
+
+    p = studies.problem("moving_point", variant="I.1", duration=4.0)
+    got = p.trivial()
+    K = np.asarray(p.Kc)
+    px = np.asarray(p.frame_pixels)
+    rays = np.linalg.solve(K, np.c_[px, np.ones(len(px))].T).T
+    guess = rays / rays[:, 2:] / float(np.asarray(p.observer.x3_guess))
+    ts, truth_ts, truth = (np.asarray(a) for a in (p.frame_ts, p.truth_ts, p.truth))
+    k = np.searchsorted(truth_ts, ts + 1e-9, side="right") - 1
+    inside = (ts >= p.window_s[0]) & (ts < p.window_s[1])
+    err = guess[inside] - truth[k[inside]]
+    want = np.sqrt(np.mean(err**2, axis=0)) * p.to_m
+    np.testing.assert_allclose(np.asarray(got["rms"]), want, rtol=1e-12)
+    assert float(got["rms_worst"]) == pytest.approx(want.max(), rel=1e-12)
+    assert p.trivial_label == "the initial depth guess"

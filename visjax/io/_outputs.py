@@ -132,6 +132,11 @@ SUMMARIES = {
         ),
         "rms_last_half?": ("list[float]", "with the truth: x, y, z RMS error, second half, m"),
         "window_s?": ("list[float]", "with the truth: that window, s"),
+        "quality?": (
+            "dict",
+            "with the truth: the worst RMS error against the initial depth guess held on "
+            "each frame's ray, over the same window (as for `velocity_data`)",
+        ),
         "dropped_fraction?": _DROPPED,
         "failed_sample?": _FAILED_SAMPLE,
     },

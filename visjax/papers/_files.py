@@ -268,6 +268,15 @@ def moving_point_from_file(path) -> FileEstimate:
         truth = np.asarray(data.position)
     if truth is not None and "failed_sample" not in body:  # no error of a frozen state
         body["rms_last_half"], body["window_s"] = last_half_rms(t, position, truth)
+        # the trivial estimate: the point on each frame's ray at the initial depth guess
+        pixels = np.asarray(data.pixels, float)
+        rays = np.linalg.solve(np.asarray(data.A, float), np.c_[pixels, np.ones(len(t))].T).T
+        guess = rays / rays[:, 2:] * info["depth_guess_m"]
+        trivial, _ = last_half_rms(t, guess, truth)
+        body["quality"] = _quality(body["rms_last_half"], trivial, "the initial depth guess")
+        if failure is None and body["quality"]["flag"] != "ok":
+            body["result"] = body["quality"]["flag"]
+            failure = f"moving_point: the result is {body['result']}: {_quality_words(body)}"
     arrays = {"t": t, "position": position, "x_hat": x_hat}
     return FileEstimate(body, arrays, t, position, truth, failure)
 
@@ -401,6 +410,7 @@ def moving_point_file_reproduction(path, *, quiet=True, write=None) -> Reproduct
         f"{body['result']}",
         _coverage_line(body),
         *_last_half_lines(body, "RMS position error (m)", "XYZ"),
+        *([f"quality: {_quality_words(body)}"] if "quality" in body else []),
     ]
     rep = _file_reproduction(
         run, "structure", functools.partial(plot_structure, title=title), lines, write
