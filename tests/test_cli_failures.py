@@ -469,3 +469,26 @@ def test_velocity_seeds_past_max_hours_are_refused_in_one_line(capsys):
     assert main([*argv, "--max-hours", "0.001"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "100000 runs estimated at" in err and "--max-hours" in err
+
+
+def test_a_signal_inside_a_gc_callback_is_sent_again_not_dropped():
+    """JAX registers a garbage collector callback; an exception raised there (SIGTERM's
+    `_Interrupted`) is printed with a traceback and dropped, and the run went on (issue
+    44's re-probe): the handler sees such a frame (`_in_gc_callback`) and sends the
+    signal again once the callback returned."""
+    import gc
+
+    from visjax.cli import _in_gc_callback
+
+    seen = []
+
+    def callback(phase, info):
+        seen.append(_in_gc_callback(sys._getframe()))
+
+    gc.callbacks.append(callback)
+    try:
+        gc.collect()
+    finally:
+        gc.callbacks.remove(callback)
+    assert seen and all(seen)
+    assert not _in_gc_callback(sys._getframe())

@@ -461,6 +461,9 @@ def _terminated_as_interrupt():
         return
 
     def handler(signum, frame):
+        if _in_gc_callback(frame):  # an exception there is printed and dropped: send again
+            threading.Timer(0.05, os.kill, (os.getpid(), signum)).start()
+            return
         raise _Interrupted(signum)
 
     previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -490,6 +493,19 @@ def _user_traceback(error) -> str:
     body = "".join(traceback.format_list(frames))
     last = "".join(traceback.format_exception_only(type(error), error))
     return "Traceback (most recent call last):\n" + body + last
+
+
+def _in_gc_callback(frame) -> bool:
+    """Whether `frame` runs inside a garbage collector's callback (JAX registers one),
+    where Python prints an exception with its traceback and drops it."""
+    import gc
+
+    codes = {getattr(cb, "__code__", None) for cb in gc.callbacks} - {None}
+    while frame is not None:
+        if frame.f_code in codes:
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _one_line(error: Exception) -> str:

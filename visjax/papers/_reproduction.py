@@ -39,10 +39,11 @@ class SeedClock:
     """The time of a loop over `runs` noise seeds, checked as it goes: after the second
     run (the first that reuses the compiled program), a loop estimated to take longer than
     `max_hours` in all is refused (`visjax.studies.StudyTooLong`, naming the estimate),
-    before the rest of the runs; call `tick()` after each run."""
+    before the rest of the runs; call `tick()` after each run. `bar`: a progress bar,
+    closed before the refusal (so that the error is the last line printed)."""
 
-    def __init__(self, runs: int, max_hours: float, what: str):
-        self.runs, self.max_hours, self.what = int(runs), float(max_hours), what
+    def __init__(self, runs: int, max_hours: float, what: str, bar=None):
+        self.runs, self.max_hours, self.what, self.bar = int(runs), float(max_hours), what, bar
         self.started = time.perf_counter()
         self.marks: list[float] = []
 
@@ -54,6 +55,8 @@ class SeedClock:
         each = self.marks[1] - self.marks[0]
         total = first + each * (self.runs - 1)
         if total > 3600.0 * self.max_hours:
+            if self.bar is not None:
+                self.bar.close()
             raise StudyTooLong(
                 f"{self.what}: {self.runs} runs estimated at {total / 3600:.3g} h ({each:.3g} s "
                 f"each after the first), past --max-hours {self.max_hours:g}: use fewer "

@@ -439,7 +439,7 @@ def velocity_reproduction(
         bar.set_postfix_str(stage)
 
     runs = []
-    clock = SeedClock(seeds, max_hours, "velocity")  # `StudyTooLong` after the second seed
+    clock = SeedClock(seeds, max_hours, "velocity", bar)  # `StudyTooLong` after seed 2
     for i in range(seeds):
         if i:
             clock.tick()

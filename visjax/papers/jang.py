@@ -854,8 +854,9 @@ def structure_reproduction(
     check_seeds(seeds, noise_px)
     names = set_names(sets)
     per_set = {}
-    clock = SeedClock(len(names) * seeds, max_hours, "moving_point")
-    for name in tqdm(names, desc="structure", unit="set", disable=quiet):
+    bar = tqdm(names, desc="structure", unit="set", disable=quiet)
+    clock = SeedClock(len(names) * seeds, max_hours, "moving_point", bar)
+    for name in bar:
         runs = []
         for i in range(seeds):
             runs.append(structure_experiment(name, duration, noise_px, seed=seed + i))

@@ -273,7 +273,7 @@ def euclidean_reproduction(
     bar = stages(1 + seeds, "euclidean", quiet)
     bar.set_postfix_str("simulate and estimate (compiles once)")
     runs = []
-    clock = SeedClock(seeds, max_hours, "static_points")
+    clock = SeedClock(seeds, max_hours, "static_points", bar)
     for i in range(seeds):
         runs.append(euclidean_experiment(duration, noise_px, seed=seed + i))
         clock.tick()
