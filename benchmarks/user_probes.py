@@ -1596,7 +1596,30 @@ def _behind(a):
     a["position"] = a["position"] * np.array([1.0, 1.0, -1.0])
 
 
-data_probe("velocity_time_ns_near_uint64_limit", "times_exact", "v", _uint64_ns)
+def _uint64_build(folder):
+    arrays = data("v")
+    _uint64_ns(arrays)
+    save(folder / "data.npz", arrays)
+    return data_cmd("v")
+
+
+def _ran_from_zero(folder, rc, out, err):
+    """Valid times near the uint64 limit: the run goes through, its times from 0 s."""
+    if rc != 0:
+        return [f"exit {rc}"]
+    with np.load(folder / "out" / "estimate.npz") as f:
+        t = f["t"]
+    return [] if abs(t[0]) < 1e-9 and abs(t[-1] - 0.499) < 1e-6 else [f"times {t[0]} to {t[-1]}"]
+
+
+PROBES.append(
+    Probe(
+        "velocity_time_ns_near_uint64_limit",
+        "times_exact",
+        command_probe(_uint64_build, check=_ran_from_zero),
+        mistake=False,
+    )
+)
 data_probe(
     "velocity_known_length_1e300",
     "plausibility",
