@@ -74,7 +74,7 @@ def run_scene(sc: dict, noise_px: float, seed: int = 0) -> dict:
     out, d = sol.outputs, sol.diagnostics
     err = np.linalg.norm(np.asarray(out.omega_s[-1] - sc["omega_s"]), axis=-1)
     err0 = np.linalg.norm(np.asarray(out.omega_s[0] - sc["omega_s"]), axis=-1)
-    R_err = so3_log(out.R_c[-1] @ sc["R_c"].T)
+    R_err = so3_log(out.R_c[-1] @ sc["R_c"].T).omega
     pe = np.asarray(pe_measure(d.info_rate_s, sol.ts, 5.0))
     t1, t2 = camera_parameters(est.N @ sc["A"], sc["R_c"], sc["x_c"])
     true_est = StaticPointsEstimator(

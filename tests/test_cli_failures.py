@@ -445,6 +445,44 @@ def test_an_estimate_worse_than_the_trivial_one_is_not_a_success(offset, flag, t
         _registry._REGISTRY.pop(name, None)
 
 
+class _Lagging(_Far):
+    """`_Far` whose estimator also reports its output error, `offset` off every sample,
+    against the noise of the samples (0.01): an observer that lags them."""
+
+    def innovation(self, method, params, solution, inputs):
+        from visjax.estimators import innovation
+
+        error = jnp.full_like(inputs, self.offset) + (inputs - jnp.mean(inputs))
+        return innovation(inputs[:, None], error[:, None])
+
+
+@pytest.mark.parametrize("offset, flag", [(0.0, "ok"), (0.1, "innovation_too_large")])
+def test_an_observer_off_its_measurements_is_warned_without_the_truth(
+    offset, flag, tmp_path, capsys
+):
+    """Issue 44 (item 1): `run` records the observer's output error against the noise the
+    data imply (`quality.innovation`, `problem.innovation`) and warns past
+    `INNOVATION_GATE`, without changing the result (the truth says the estimate is fine)."""
+    from visjax.studies import INNOVATION_GATE, _registry
+
+    name = f"lag-toy-{flag}"
+    studies.register_problem(
+        name, lambda *, noise_px=0.0: _Lagging(jnp.full(64, 2.0), offset), replace=True
+    )
+    try:
+        out = tmp_path / "run"
+        assert main(["run", name, "--quiet", "--out", str(out)]) == 0
+        printed = capsys.readouterr()
+        summary = io.read_summary(out / "summary.json")
+        q = summary["quality"]
+        assert summary["result"] == "successful" and q["flag"] == flag, q
+        ratio = q["innovation"]["ratio"]
+        assert (ratio > INNOVATION_GATE) == (flag != "ok") and q["innovation"]["samples"] == 64
+        assert ("warning: run" in printed.err) == (flag != "ok"), printed.err
+    finally:
+        _registry._REGISTRY.pop(name, None)
+
+
 def test_seed_loops_are_timed_against_max_hours(monkeypatch):
     """Issue 44: `velocity|moving_point|static_points --seeds N` estimate the whole loop
     after the second seed (the first reuses the compiled run) and refuse it past

@@ -94,6 +94,11 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
         "More than `visjax.io.MAX_DROPPED_FRACTION` of the frames have a feature missing "
         "(`dropped_fraction()`): the estimate rests mostly on held or extrapolated frames."
     )
+    not_a_rotation = (
+        "A matrix that should be a rotation is not one: R^T R != I or det R != 1 beyond "
+        "the tolerance of `visjax.geometry.so3_log` (10 sqrt(eps))."
+    )
+    nonfinite_matrix = "A matrix given is not finite (a NaN or inf entry)."
 
 
 def raise_or_keep(result, x, throw: bool):

@@ -306,7 +306,7 @@ def run_command(
 
     from ._results import result_names
     from .report import RunFailed
-    from .studies import as_json, quality, quality_line, solution
+    from .studies import as_json, innovation_line, quality, quality_line, solution
 
     results, failures = {}, []
     dropped = _dropped(problem, data)
@@ -329,8 +329,10 @@ def run_command(
         elif dropped is not None and dropped["over"]:
             code = dropped["result"]
             failure = f"run {problem}: {head}the result is {code}: {dropped['line']}"
-        judged = quality(p, values) if ok else None
-        if failure is None and judged is not None and judged["flag"] != "ok":
+        inputs = p.inputs(jax.random.key(seed))
+        innovation = p.innovation(m, p.resolve({}), sol, inputs) if ok else None
+        judged = quality(p, values, innovation=innovation) if ok else None
+        if failure is None and judged is not None and judged["flag"] == "worse_than_trivial":
             code = judged["flag"]
             failure = f"run {problem}: {head}the result is {code}: {quality_line(judged)}"
         body = {
@@ -349,6 +351,9 @@ def run_command(
         print(f"{head}{p.title}: {m}, {code}")
         if judged is not None:
             print(f"{head}  quality: {quality_line(judged)}")
+            if judged.get("innovation", {}).get("flag", "ok") != "ok":
+                warn = innovation_line(judged["innovation"])
+                print(f"warning: run {problem}: {head}{warn}", file=sys.stderr)
         if dropped is not None:
             print(f"{head}  {dropped['line']}")
         for k, v in body["metrics"].items():

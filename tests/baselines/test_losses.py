@@ -97,7 +97,7 @@ def test_frame_pose_covariance_predicts_the_monte_carlo_spread():
     # rotation vectors of each estimate about a common one (small: their spread)
     from visjax.geometry import so3_log
 
-    phi = jax.vmap(lambda R: so3_log(R @ R0.T))(poses.R)
+    phi = jax.vmap(lambda R: so3_log(R @ R0.T).omega)(poses.R)
     est = np.concatenate([np.asarray(phi), np.asarray(poses.x_f)], 1)
     predicted = np.sqrt(np.mean(np.diagonal(np.asarray(poses.cov), axis1=1, axis2=2), 0))
     spread = est.std(0, ddof=1)

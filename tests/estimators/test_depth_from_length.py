@@ -30,7 +30,7 @@ def test_exact_on_random_irregular_coplanar_sets():
     for _ in range(50):
         points, A, normal = _scene(rng)
         assert np.all(points[:, 2] > 0)
-        p = np.asarray(project(points, A))
+        p = np.asarray(project(points, A).pixels)
         i, j = rng.choice(5, 2, replace=False)
         L = np.linalg.norm(points[i] - points[j])
         z1 = depth_from_feature_length(p, A, normal, (int(i), int(j), L))
@@ -44,7 +44,7 @@ def test_exact_on_random_irregular_coplanar_sets():
 def test_jit_vmap_grad():
     rng = np.random.default_rng(4)
     scenes = [_scene(rng) for _ in range(8)]
-    P = np.stack([np.asarray(project(s[0], s[1])) for s in scenes])
+    P = np.stack([np.asarray(project(s[0], s[1]).pixels) for s in scenes])
     A = np.stack([s[1] for s in scenes])
     N = np.stack([s[2] for s in scenes])
     L = np.array([np.linalg.norm(s[0][1] - s[0][3]) for s in scenes])
@@ -61,7 +61,7 @@ def test_jit_vmap_grad():
 def test_bad_known_length(no_jaxtyping):
     rng = np.random.default_rng(5)
     points, A, normal = _scene(rng)
-    p = np.array(project(points, A))
+    p = np.array(project(points, A).pixels)
     with pytest.raises(ValueError, match="two different features"):
         depth_from_feature_length(p, A, normal, (2, 2, 1.0))
     with pytest.raises(ValueError, match="two different features"):

@@ -51,7 +51,7 @@ def test_e_dot_equals_J_v():
     """eq. (32): the time derivative of the reconstruction-based e is J v (jvp vs J v)."""
     sc = section6_scenario(0.3, 1000.0)  # only the constants are used
     A, R_star, s, x_f_star = sc.A, sc.R_star, sc.s, sc.x_f_star
-    p_ref = project(x_f_star[None, :] + s @ R_star.T, A)
+    p_ref = project(x_f_star[None, :] + s @ R_star.T, A).pixels
     camera = FixedCamera(p_ref, A, R_star, s[0], sc.n_star, sc.z1_star)
     rng = np.random.default_rng(0)
     poses = [(np.zeros(3), np.zeros(3))]  # the reference pose itself (H = I)
@@ -65,10 +65,10 @@ def test_e_dot_equals_J_v():
         def e_of_t(t):
             R = so3_exp(t * v[3:]) @ R0  # [omega]x = dR/dt R^T = [v[3:]]x
             x = x0 + t * v[:3]
-            p = project(x[None, :] + s @ R.T, A)
+            p = project(x[None, :] + s @ R.T, A).pixels
             return velocity_measurements(camera, p).e
 
-        y = velocity_measurements(camera, project(x0[None, :] + s @ R0.T, A))
+        y = velocity_measurements(camera, project(x0[None, :] + s @ R0.T, A).pixels)
         _, e_dot = jax.jvp(e_of_t, (jnp.zeros(()),), (jnp.ones(()),))
         return y.J @ v, e_dot, y.J_inv @ y.J
 

@@ -191,3 +191,45 @@ def test_a_missing_feature_does_not_change_the_features_behind_e(runs):
     clean, held, mixed = rms(full, 10), rms(noisy, 10), rms(noisy, 1)
     assert abs(held / clean - 1.0) < 0.1, (held, clean)
     assert mixed > 2.0 * held, (mixed, held)
+
+
+def test_innovation_gates_a_lagging_estimator_without_the_truth(runs):
+    """Issue 44 (item 1, without the truth): the estimator's output error e - e_hat against
+    the noise its frames imply (`velocity_innovation`). The paper's gains track their
+    measurements (ratio about 1 at 0.1 px, below 1 noise-free: the chatter floor); gains
+    100 times smaller lag them (ratio past `INNOVATION_GATE`), and their velocity is
+    indeed worse. `innovation` against a NumPy transcription."""
+    from visjax.estimators import innovation, velocity_innovation
+    from visjax.studies import INNOVATION_GATE
+
+    ts, pixels, seen, rig, body, s = _scene(0.0)
+    camera = runs[0.0]["stream"].measure.camera
+    noisy = pixels + 0.1 * jax.random.normal(jax.random.key(3), pixels.shape)
+    ratios = {}
+    for name, frames, scale in [
+        ("clean", pixels, 1.0),
+        ("paper", noisy, 1.0),
+        ("slow", noisy, 0.01),
+    ]:
+        stream = velocity_stream(ts, frames, camera)
+        est = VelocityEstimator(K=jnp.asarray(K_EQ63) * scale, rho=jnp.asarray(RHO_EQ63) * scale)
+        sol = run(est, stream, saveat=SaveAt(diagnostics=True))
+        inn = velocity_innovation(stream, sol, est, t_start=WINDOW[0])
+        ratios[name] = float(inn.ratio)
+        late = np.asarray(ts) >= WINDOW[0]
+        # the transcription: RMS of e_tilde over the window, noise from e's changes / sqrt 2
+        e = np.asarray(stream.measured().ys.e)[late]
+        e_tilde = np.asarray(sol.diagnostics.e_tilde)[late]
+        noise = np.sqrt(np.mean(np.diff(e, axis=0) ** 2, axis=0) / 2)
+        floor = 4 / np.pi * np.asarray(RHO_EQ63) * scale * 1e-3 / (np.asarray(K_EQ63) * scale + 1)
+        want = np.max(np.sqrt(np.mean(e_tilde**2, axis=0)) / np.maximum(noise, floor))
+        np.testing.assert_allclose(ratios[name], want, rtol=1e-9)
+    assert ratios["clean"] < 1.0 and ratios["paper"] < 1.5, ratios
+    assert ratios["slow"] > INNOVATION_GATE, ratios
+    # pure JAX: jit, vmap, grad
+    y = jax.random.normal(jax.random.key(0), (3, 50, 2))
+    err = 0.5 * y
+    batched = jax.jit(jax.vmap(innovation))(y, err)
+    np.testing.assert_allclose(batched.ratio[1], innovation(y[1], err[1]).ratio, rtol=1e-12)
+    g = jax.grad(lambda a: innovation(y[0], a * err[0]).ratio)(1.0)
+    np.testing.assert_allclose(g, innovation(y[0], err[0]).ratio, rtol=1e-9)  # linear in a

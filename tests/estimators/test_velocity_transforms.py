@@ -72,7 +72,7 @@ def test_depth_recovery_refuses_a_broken_premise():
     A, R_star = jnp.array(A_EQ62), jnp.array(R_STAR_EQ61)
     x_f_star = jnp.array([0.0, 0.0, 1.3])
     s = jnp.array([[-0.1, 0.12, 0.02], [0.13, 0.1, 0.02], [0.09, -0.1, 0.02], [-0.12, -0.08, 0.02]])
-    p_ref = project(x_f_star[None, :] + s @ R_star.T, A)
+    p_ref = project(x_f_star[None, :] + s @ R_star.T, A).pixels
     n_star = R_star @ jnp.array([0.0, 0.0, 1.0])
     n_star = jnp.where(n_star @ (x_f_star + R_star @ s[0]) > 0, n_star, -n_star)
     with pytest.raises(RuntimeError, match="does not hold"):

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from visjax import RESULTS
+from visjax import RESULTS, result_names
 from visjax.geometry import (
     camera_matrix,
     camera_matrix_lstsq,
@@ -66,12 +66,12 @@ def test_so3_log_never_turns_nan_into_a_finite_vector():
             for bad in (np.nan, np.inf):
                 Rb = R.copy()
                 Rb[i, j] = bad
-                assert np.all(np.isnan(so3_log(Rb)))
+                assert np.all(np.isnan(so3_log(Rb).omega))
     with pytest.raises(RuntimeError, match="not a rotation"):
         so3_log(np.diag([1.0, 1.0, 2.0]))
     with pytest.raises(RuntimeError, match="not a rotation"):
         so3_log(np.diag([1.0, 1.0, -1.0]))  # a reflection
-    np.testing.assert_allclose(so3_log(R), [0.3, -1.2, 1.9], rtol=1e-12)
+    np.testing.assert_allclose(so3_log(R).omega, [0.3, -1.2, 1.9], rtol=1e-12)
 
 
 def test_projection_with_unusable_intrinsics():
@@ -97,7 +97,7 @@ def test_camera_matrix_lstsq_checks_its_data():
         camera_matrix_lstsq(m, bad)
     # offset, narrow data: the centred solve keeps the digits the raw sums lost
     narrow = 1e3 + 1e-3 * m
-    theta = camera_matrix_lstsq(narrow, narrow * 550.0 + 300.0)
+    theta = camera_matrix_lstsq(narrow, narrow * 550.0 + 300.0).theta
     np.testing.assert_allclose(theta[:2], [550.0, 550.0], rtol=1e-7)
 
 
@@ -152,3 +152,37 @@ def test_what_users_catch_outside_and_inside_jit():
     warm(m, p)
     with pytest.raises((RuntimeError, ValueError), match=cause):
         warm(m, bad)
+
+
+def test_throw_false_keeps_a_batch_alive(no_jaxtyping):
+    """Issue 44 (item 6): `project`, `so3_log` and `camera_matrix_lstsq` with `throw=False`
+    return the same type as with `throw=True`, the failure as its `result` and NaN values;
+    under `vmap` one bad frame leaves the others as the single calls give them."""
+    from visjax.geometry import project, so3_exp, so3_log
+
+    A = np.array([[800.0, 0, 320], [0, 790.0, 240], [0, 0, 1]])
+    X = np.array([[[0.1, 0.2, 2.0]], [[0.1, 0.2, -1.0]], [[np.nan, 0.0, 1.0]]])
+    out = jax.vmap(lambda x: project(x, A, throw=False))(X)
+    assert result_names(out.result) == ["successful", "behind_camera", "nonfinite_pixels"]
+    np.testing.assert_allclose(out.pixels[0], project(X[0], A).pixels, rtol=1e-15)
+    assert np.all(np.isnan(out.pixels[1:]))
+    Rs = np.stack([np.asarray(so3_exp(np.array([0.3, -0.2, 0.1]))), np.diag([1.0, 1.0, 2.0])])
+    logs = jax.vmap(lambda R: so3_log(R, throw=False))(Rs)
+    assert list(result_names(logs.result)) == ["successful", "not_a_rotation"]
+    np.testing.assert_allclose(logs.omega[0], [0.3, -0.2, 0.1], rtol=1e-12)
+    assert np.all(np.isnan(logs.omega[1]))
+    assert result_names(so3_log(np.full((3, 3), np.nan)).result) == "nonfinite_matrix"
+    m = np.random.default_rng(0).uniform(-0.3, 0.3, (3, 8, 2))
+    m[1, :, 0] = 0.1  # no variation along x
+    m[2, 0, 1] = np.nan
+    p = m * [550.0, 560.0] + [300.0, 250.0]
+    fits = jax.vmap(lambda a, b: camera_matrix_lstsq(a, b, throw=False))(m, p)
+    assert list(result_names(fits.result)) == [
+        "successful",
+        "degenerate_points",
+        "nonfinite_pixels",
+    ]
+    np.testing.assert_allclose(fits.theta[0], [550.0, 560.0, 300.0, 250.0], rtol=1e-9)
+    assert np.all(np.isnan(fits.theta[1:]))
+    with pytest.raises(ValueError, match="throw"):
+        project(X[0], A, throw=1)

@@ -44,7 +44,7 @@ def test_project_matches_opencv():
     rng = np.random.default_rng(1)
     X = np.c_[rng.uniform(-0.5, 0.5, (30, 2)), rng.uniform(1.0, 3.0, 30)]
     ref, _ = cv2.projectPoints(X, np.zeros(3), np.zeros(3), A62, None)
-    np.testing.assert_allclose(jax.jit(project)(X, A62), ref[:, 0, :], rtol=1e-12)
+    np.testing.assert_allclose(jax.jit(project)(X, A62).pixels, ref[:, 0, :], rtol=1e-12)
 
 
 def test_project_jit_vmap_grad():
@@ -52,11 +52,11 @@ def test_project_jit_vmap_grad():
     X = np.concatenate([rng.uniform(-0.5, 0.5, (8, 5, 2)), rng.uniform(1.0, 3.0, (8, 5, 1))], -1)
     batched = jax.jit(jax.vmap(project, in_axes=(0, None)))(X, A62)
     for i in range(8):
-        np.testing.assert_allclose(batched[i], project(X[i], A62), rtol=1e-15)
+        np.testing.assert_allclose(batched.pixels[i], project(X[i], A62).pixels, rtol=1e-15)
     x0 = X[0, 0]
-    J = jax.jit(jax.jacrev(lambda x: project(x, A62)))(x0)
+    J = jax.jit(jax.jacrev(lambda x: project(x, A62).pixels))(x0)
     np.testing.assert_allclose(
-        J, central_difference(lambda x: project(x, A62), x0, 1e-6), rtol=1e-7
+        J, central_difference(lambda x: project(x, A62).pixels, x0, 1e-6), rtol=1e-7
     )
 
 

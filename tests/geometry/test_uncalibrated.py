@@ -41,7 +41,7 @@ def test_regressors_reproduce_the_projection():
     for _ in range(50):
         A, R_c, x_c, R_b, x_b, omega, m_bar = _random_configuration(rng)
         np.testing.assert_allclose(feature_in_camera(omega, R_b, x_b, R_c, x_c), m_bar, rtol=1e-12)
-        pixel = project(m_bar, A)  # eq. (3)
+        pixel = project(m_bar, A).pixels  # eq. (3)
         t1, t2 = camera_parameters(A, R_c, x_c)
         theta_s = jnp.concatenate([omega, jnp.ones(1)])  # eq. (11)
         W, Pi = unknown_feature_regressors(R_b, x_b, t1, t2)

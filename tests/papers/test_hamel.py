@@ -285,3 +285,15 @@ def test_sweep_and_run_commands(tmp_path, capsys):
     argv = ["run", "homography", "--set", "tracking", "--duration", "0.4", "--quiet"]
     assert main([*argv, "--out", str(run_out)]) == 0
     assert next(run_out.rglob("run.png")).stat().st_size > 0
+
+
+def test_the_trivial_estimate_is_the_identity(tracking):
+    """Issue 44: `HomographyProblem.trivial()`, the identity held, scored as the methods
+    are: the RMS over the second half of |H^-1 - I|_F and its last value (NumPy)."""
+    H = np.asarray(tracking.scene.H)
+    err = np.linalg.norm(np.linalg.inv(H) - np.eye(3), axis=(1, 2))
+    got = tracking.trivial()
+    np.testing.assert_allclose(
+        got["error"], np.sqrt(np.mean(err[len(err) // 2 :] ** 2)), rtol=1e-12
+    )
+    np.testing.assert_allclose(got["final_error"], err[-1], rtol=1e-12)

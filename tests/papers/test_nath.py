@@ -131,3 +131,22 @@ def test_a_vanishing_scale_entry_is_a_result_code():
     sol = run(est, stream(sc), throw=False)
     assert sol.result == RESULTS.diverged and int(sol.failed_sample) == 0
     assert np.all(np.isfinite(sol.final_state.theta_s))
+
+
+def test_the_trivial_estimate_is_the_estimators_initial_guess():
+    """Issue 44: `StaticPointsProblem.trivial()` scores the estimator's initial guess, the
+    output of its initial state; decoded exactly (to 1e-9 m) from positions given as the
+    guess (`from_nominal(omega_s_guess=...)`)."""
+    from visjax import papers
+    from visjax.estimators import StaticPointsEstimator
+
+    p = papers.static_points_problem(duration=2.0)
+    stream, _ = p._estimator(p.clean)
+    guess = np.asarray(p.truth) + np.array([0.01, -0.02, 0.03])
+    est = StaticPointsEstimator.from_nominal(
+        stream, p.A_nominal, p.R_c_nominal, p.x_c_nominal, omega_s_guess=guess
+    )
+    y0 = jax.tree_util.tree_map(lambda x: x[0], stream.ys)
+    np.testing.assert_allclose(est.output(p.ts[0], est.init(y0), y0).omega_s, guess, atol=1e-9)
+    trivial = p.trivial()
+    assert trivial["error"].shape == (guess.shape[0],) and float(trivial["error_worst"]) > 0.01

@@ -371,3 +371,15 @@ def test_closed_loop_bad_input_and_true_start(no_jaxtyping):
     assert sol.result == RESULTS.successful
     z = np.asarray(sol.outputs.z[:, 0])
     assert np.abs(z).max() < 1e-4, np.abs(z).max()
+
+
+def test_the_trivial_estimate_is_the_initial_depth_guess():
+    """Issue 44: `PointDepthProblem.trivial()`, the initial inverse depth chi0 held: the
+    worst relative depth error at the end, |1.5 / Z - 1| (NumPy), for both projections."""
+    for variant in ("planar", "spherical"):
+        p = spica.point_depth_problem(variant=variant, duration=0.05)
+        P = np.asarray(p.scene.points)[-1]
+        depth = P[:, 2] if variant == "planar" else np.linalg.norm(P, axis=-1)
+        got = p.trivial()
+        np.testing.assert_allclose(got["depth_error"], np.max(np.abs(1.5 / depth - 1)), rtol=1e-12)
+        assert float(got["time_to_5pct"]) == pytest.approx(float(p.scene.ts[-1] - p.scene.ts[0]))

@@ -96,7 +96,7 @@ def test_rig_follows_eq5_and_the_field_of_view():
     p = view(rig, pts)
     p = np.asarray(p)
     assert np.isnan(p[1]).all() and np.isnan(p[2]).all()
-    np.testing.assert_allclose(p[[0, 3]], project(pts[jnp.array([0, 3])], A), atol=1e-12)
+    np.testing.assert_allclose(p[[0, 3]], project(pts[jnp.array([0, 3])], A).pixels, atol=1e-12)
     assert np.isfinite(view(CameraRig(A=A, image_size=None), pts[2])).all()
     # the skew angle enters as eq. (4) of Nath et al.
     np.testing.assert_allclose(A[0, 1], 900.0 / np.tan(np.deg2rad(91.5)), rtol=1e-12)

@@ -229,7 +229,7 @@ def bundle_adjustment(
     a0 = jnp.stack([init.A[0, 0], init.A[0, 1], init.A[0, 2], init.A[1, 1], init.A[1, 2]])
     # unknowns of order one: the intrinsics relative to the nominal focal length
     scale = jnp.abs(init.A[0, 0])
-    y_init = {"r_c": so3_log(init.R_c), "x_c": init.x_c, "omega_s": init.omega_s}
+    y_init = {"r_c": so3_log(init.R_c).omega, "x_c": init.x_c, "omega_s": init.omega_s}
     if intrinsics == "fit":
         y_init["a"] = a0 / scale
     a_known = a0 / scale  # the intrinsics where they are not fitted
@@ -340,7 +340,7 @@ def bundle_adjustment_residuals(
     n_frames = jnp.shape(stream.ts)[0]
     scale = jnp.ones((), A.dtype)
     a = jnp.stack([A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2]])
-    y = {"a": a, "r_c": so3_log(R_c), "x_c": x_c, "omega_s": omega_s}
+    y = {"a": a, "r_c": so3_log(R_c).omega, "x_c": x_c, "omega_s": omega_s}
     keep = jnp.ones(n_frames, bool)
     args = (ys.R_b, ys.x_b, ys.p_s, ys.p_c, vis_s, vis_c, omega_c, keep, scale, a)
     return _residuals(y, args)
@@ -435,7 +435,7 @@ def static_points_ekf(
     init = _initial(estimator, y0)
     scale = jnp.abs(init.A[0, 0])
     a0 = jnp.stack([init.A[0, 0], init.A[0, 1], init.A[0, 2], init.A[1, 1], init.A[1, 2]])
-    x0 = jnp.concatenate([a0 / scale, so3_log(init.R_c), init.x_c, init.omega_s.reshape(-1)])
+    x0 = jnp.concatenate([a0 / scale, so3_log(init.R_c).omega, init.x_c, init.omega_s.reshape(-1)])
     dtype = x0.dtype
     sf, sp = jnp.asarray(sigma_focal, dtype), jnp.asarray(sigma_principal_px, dtype) / scale
     sr, so, sw = (jnp.asarray(s, dtype) for s in (sigma_rotation, sigma_offset, sigma_feature))

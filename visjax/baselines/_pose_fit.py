@@ -298,7 +298,7 @@ def _velocity_outputs(poses, ts, half_width, degree, causal):
     def at(k, idx, use, c):
         R_k = jnp.where(ok[k], poses.R[k], jnp.eye(3, dtype=ts.dtype))
         R_j = jnp.where(use[:, None, None], poses.R[idx], jnp.eye(3, dtype=ts.dtype))
-        rot = jax.vmap(lambda R: so3_log(R @ R_k.T))(R_j)  # exp(rot) R_k = R_j
+        rot = jax.vmap(lambda R: so3_log(R @ R_k.T).omega)(R_j)  # exp(rot) R_k = R_j
         pos = jnp.where(use[:, None], poses.x_f[idx], 0.0)
         v = c @ jnp.concatenate([pos, rot], 1)
         R = poses.R[k]
@@ -438,7 +438,7 @@ class _ConstantAcceleration(AbstractEKFModel):
         p, phi, v, w, a, al = (x[3 * i : 3 * i + 3] for i in range(6))
         turn = so3_exp(w * dt + 0.5 * al * dt**2) @ so3_exp(phi)
         return jnp.concatenate(
-            [p + v * dt + 0.5 * a * dt**2, so3_log(turn), v + a * dt, w + al * dt, a, al]
+            [p + v * dt + 0.5 * a * dt**2, so3_log(turn).omega, v + a * dt, w + al * dt, a, al]
         )
 
     def process_noise(self, x, u, dt):

@@ -321,6 +321,56 @@ class WindowSummary(eqx.Module):
 
 
 @final
+class Innovation(eqx.Module):
+    """An observer's output error (innovation) against the noise level the data imply: a
+    check of an estimate without the truth (`innovation`).
+
+    **Fields:** `output_rms` (m,): per measured output, the RMS of the observer's output
+    error $y - \\hat y$; `noise_rms` (m,): the level that error would have if it were the
+    measurement noise alone, the RMS of the change between consecutive samples over
+    $\\sqrt2$ (for white noise $\\sigma$ it is $\\sigma$; the motion between two samples only
+    adds to it), or the observer's own stated floor where larger (e.g. the chatter of a
+    sign term); `ratio`: the largest `output_rms / noise_rms` (NaN without a pair of
+    samples); `samples`: the samples counted. An observer tracking its measurements has
+    `ratio` about 1 or below; one that lags them or has lost them, far above.
+    """
+
+    output_rms: Float[Array, " m"]
+    noise_rms: Float[Array, " m"]
+    ratio: Float[Array, ""]
+    samples: Int[Array, ""]
+
+
+def innovation(y, output_error, used=None, floor=0.0) -> Innovation:
+    """The `Innovation` of an observer from its measured outputs `y` (N, m) and its output
+    error `output_error` (N, m), $y - \\hat y$ at the same samples; `used` (N,) bool marks
+    the samples that count (default all; a sample with a non-finite value never counts;
+    the noise level is taken over pairs of consecutive counted samples); `floor` (m,) or
+    scalar: the observer's own floor of the output error, the least `noise_rms`. Pure JAX
+    (`jit`, `vmap`, `grad`)."""
+    y = jnp.asarray(y)
+    output_error = jnp.asarray(output_error)
+    if y.ndim != 2 or output_error.shape != y.shape:
+        raise ValueError(
+            f"`y` and `output_error` must both be (N, m); got {tuple(y.shape)} and "
+            f"{tuple(output_error.shape)}."
+        )
+    used = jnp.ones(y.shape[:1], bool) if used is None else jnp.asarray(used, bool)
+    used = used & jnp.all(jnp.isfinite(y), axis=1) & jnp.all(jnp.isfinite(output_error), axis=1)
+    pair = used[1:] & used[:-1]
+
+    def rms(d, ok):
+        n = jnp.maximum(jnp.sum(ok), 1).astype(d.dtype)
+        return jnp.sqrt(jnp.sum(jnp.where(ok[:, None], d, 0.0) ** 2, axis=0) / n)
+
+    output = rms(output_error, used)
+    noise = jnp.maximum(rms(y[1:] - y[:-1], pair) / jnp.sqrt(2.0), floor)
+    some = (jnp.sum(pair) > 0) & jnp.all(noise > 0)
+    ratio = jnp.where(some, jnp.max(output / jnp.where(noise > 0, noise, 1.0)), jnp.nan)
+    return Innovation(output, noise, ratio, jnp.sum(used))
+
+
+@final
 class WindowRMS(AbstractReducer):
     """RMS and max-abs of `output.<field> - truth` over `t_start <= t < t_end`.
 

@@ -26,7 +26,14 @@ from .._results import all_finite
 from .._util import as_float, check_shape, positive_finite
 from ..geometry import pixel_to_normalized
 from ..kinematics import camera_term, known_input_term
-from ._base import AbstractEstimator, Stream, checked_samples, reject_mask
+from ._base import (
+    AbstractEstimator,
+    Innovation,
+    Stream,
+    checked_samples,
+    innovation,
+    reject_mask,
+)
 
 C_OUTPUT = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # y = C x, eq. (3.1)
 
@@ -457,3 +464,31 @@ def _normalized_held(ts, pixels, K_c, dropped):
             ahead = (ts - ts[last])[:, None]
             pixels = jnp.where(seen[:, None], pixels, held + ahead * slope)
     return pixel_to_normalized(pixels, K_c)
+
+
+def moving_point_innovation(
+    frame_ts: Float[ArrayLike, " N"],
+    pixels: Float[ArrayLike, "N 2"],
+    K_c: Float[ArrayLike, "3 3"],
+    ts: Float[ArrayLike, " M"],
+    x_hat: Float[ArrayLike, "M 3"],
+    *,
+    t_start: float = -jnp.inf,
+    t_end: float = jnp.inf,
+) -> Innovation:
+    """The output error of the unknown input observer (Jang's thesis, eq. (3.5)), $y -
+    \\hat y$ with $y = [x_1, x_2]$ a frame's normalized image coordinates and $\\hat y = [\\hat
+    x_1, \\hat x_2]$ the observer's prediction of them when the frame arrives (its estimate
+    saved at or before the frame's time, `ts`, `x_hat`), against the noise level the frames
+    imply (`Innovation`): a check of a run without the truth. Frames with a NaN pixel (not
+    seen) and outside `[t_start, t_end)` do not count. Pure JAX (`jit`, `vmap`, `grad`)."""
+    frame_ts = as_float(frame_ts)
+    ts = as_float(ts)
+    x_hat = jnp.asarray(x_hat)
+    if x_hat.shape != (ts.shape[0], 3):
+        raise ValueError(f"`x_hat` must be (M, 3) for `ts` (M,); got {tuple(x_hat.shape)}.")
+    y = pixel_to_normalized(jnp.asarray(pixels), K_c)
+    k = jnp.searchsorted(ts, frame_ts + 1e-9, side="right") - 1
+    predicted = x_hat[jnp.clip(k, 0, ts.shape[0] - 1), :2]
+    used = (k >= 0) & (frame_ts >= t_start) & (frame_ts < t_end)
+    return innovation(y, y - predicted, used)

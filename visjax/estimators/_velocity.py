@@ -45,7 +45,14 @@ from ..geometry import (
     so3_log,
     to_homogeneous,
 )
-from ._base import AbstractEstimator, Stream, reject_mask, rejected_samples
+from ._base import (
+    AbstractEstimator,
+    Innovation,
+    Stream,
+    innovation,
+    reject_mask,
+    rejected_samples,
+)
 
 CHATTER_FRACTION = 1e-2
 """The chattering bound of `VelocityEstimator`'s sign gain $\\rho$: the chatter that the
@@ -107,7 +114,7 @@ def error_signal(
     """
     p1_cur, p1_ref, alpha1, R_bar = (as_float(x) for x in (p1_cur, p1_ref, alpha1, R_bar))
     e_v = jnp.concatenate([p1_cur - p1_ref, -jnp.log(alpha1)[None]])
-    return jnp.concatenate([e_v, so3_log(R_bar)])
+    return jnp.concatenate([e_v, so3_log(R_bar).omega])
 
 
 def kinematics_jacobian(
@@ -937,3 +944,50 @@ def velocity_stream(
             measure = eqx.tree_at(lambda m: m.camera.p_ref, measure, checked)
     stream = Stream(ts=ts, ys=pixels, truth=truth, present=present, measure=measure, chunk=chunk)
     return rejected_samples(stream, reject)
+
+
+def velocity_innovation(
+    stream: Stream,
+    solution,
+    estimator: "VelocityEstimator",
+    *,
+    t_start: float = -jnp.inf,
+    t_end: float = jnp.inf,
+    step: float | None = None,
+    batch_size: int | None = None,
+) -> Innovation:
+    """The output error of Chitrakaran et al.'s estimator, $\\tilde e = e - \\hat e$ (eq.
+    (36)), against the noise level its measurements imply (`Innovation`): a check of a run
+    without the truth. Theorem 1 drives $\\tilde e$ to zero (eq. (35)); with noisy samples it
+    settles at the noise of $e$, and sampled at the step $h$ the sign term keeps a limit
+    cycle of amplitude $\\frac{4}{\\pi}\\rho_i h/(k_i + 1)$ (see `VelocityEstimator`), the
+    estimator's own floor of $\\tilde e_i$. An output error far above both (`ratio`) is an
+    estimator that lags its measurements or has lost them: its velocity, $J^{-1}\\hat\\kappa$,
+    is not to be trusted.
+
+    **Arguments:** `stream` (`velocity_stream`, the frames the run used); `solution`, the
+    run's `Solution` saved with its diagnostics (`SaveAt(diagnostics=True)`: $\\tilde e$ at
+    its saved times; each used frame takes the value saved at or before it); `estimator`
+    (its gains give the floor); `step`, the run's integration step $h$ (default: the
+    frames' median interval, `run`'s default); the samples counted are those used and
+    inside `[t_start, t_end)`.
+
+    Pure JAX (`jit`, `vmap`, `grad`); memory: the stream's prepared frames (`Stream.measured`,
+    `batch_size` at a time)."""
+    diagnostics = getattr(solution, "diagnostics", None)
+    if not isinstance(diagnostics, VelocityDiagnostics):
+        raise ValueError(
+            "`solution` must be a velocity estimator's run saved with its diagnostics "
+            "(`SaveAt(diagnostics=True)`)."
+        )
+    ts = solution.ts
+    y = stream.measured(batch_size).ys
+    t = stream.ts
+    k = jnp.searchsorted(ts, t + 1e-9, side="right") - 1
+    e_tilde = diagnostics.e_tilde[jnp.clip(k, 0, ts.shape[0] - 1)]
+    used = (k >= 0) & (t >= t_start) & (t < t_end)
+    if stream.present is not None:
+        used = used & stream.present
+    h = jnp.median(jnp.diff(t)) if step is None else step
+    floor = 4.0 / jnp.pi * estimator.rho * h / (estimator.K + 1.0)  # the sign term's chatter
+    return innovation(y.e, e_tilde, used, floor)

@@ -1,10 +1,12 @@
 """Camera model, SO(3) and SL(3), homography estimation and decomposition: pure JAX functions."""
 
 from ._calibration import (
+    CameraFit as CameraFit,
     camera_matrix as camera_matrix,
     camera_matrix_lstsq as camera_matrix_lstsq,
 )
 from ._camera import (
+    Projection as Projection,
     extended_intrinsics as extended_intrinsics,
     intrinsic_matrix as intrinsic_matrix,
     normalized_to_pixel as normalized_to_pixel,
@@ -40,6 +42,7 @@ from ._sl3 import (
 from ._so3 import (
     L_omega as L_omega,
     L_omega_inv as L_omega_inv,
+    RotationVector as RotationVector,
     sinc as sinc,
     skew as skew,
     so3_exp as so3_exp,

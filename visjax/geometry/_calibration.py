@@ -7,28 +7,61 @@ $\\hat\\theta = S^+\\beta$. The two image axes decouple, so each is a 2x2 normal
 solve here: the same minimiser, smooth in the data (no SVD).
 """
 
+from typing import final
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._results import RESULTS
 from .._util import as_float, check_shape
 
 
-def camera_matrix_lstsq(
-    m: Float[ArrayLike, "n 2"], p: Float[ArrayLike, "n 2"]
-) -> Float[Array, "4"]:
-    """$\\hat\\theta = [f, af, c_x, c_y]$ by least squares from normalized coordinates `m` and
-    pixels `p` of the same points (Jang's thesis, section 2.3).
+@final
+class CameraFit(eqx.Module):
+    """What `camera_matrix_lstsq` returns.
 
-    Raises at run time if a coordinate is not finite, or if the normalized coordinates do
-    not vary along an axis (the regression is then singular). Each axis is solved from
+    **Fields:** `theta` (4,): $[f, af, c_x, c_y]$, NaN when the fit failed (never a finite
+    placeholder); `result`: a `RESULTS` item, `successful`, or (with `throw=False`)
+    `nonfinite_pixels` (a coordinate not finite) or `degenerate_points` (the normalized
+    coordinates do not vary along an axis: the regression is singular).
+    """
+
+    theta: Float[Array, "4"]
+    result: RESULTS
+
+
+def camera_matrix_lstsq(
+    m: Float[ArrayLike, "n 2"], p: Float[ArrayLike, "n 2"], *, throw: bool = True
+) -> CameraFit:
+    """$\\hat\\theta = [f, af, c_x, c_y]$ by least squares from normalized coordinates `m` and
+    pixels `p` of the same points (Jang's thesis, section 2.3). Each axis is solved from
     centred sums.
+
+    `throw`: if `True` (default), a coordinate that is not finite, or normalized
+    coordinates that do not vary along an axis (the regression is then singular), raise at
+    run time; with `False` the failure is the `result` (and `theta` NaN), so that one bad
+    frame of a `jax.vmap` batch leaves the others intact.
+
+    **Returns:** a `CameraFit`: `theta` and `result`.
     """
     m, p = as_float(m), as_float(p)
     if m.ndim != 2 or m.shape[-1] != 2 or m.shape != p.shape or m.shape[0] < 2:
         raise ValueError(
             f"`m` and `p` must both have shape (n, 2) with n >= 2; got {m.shape} and {p.shape}."
         )
+    if not isinstance(throw, bool):
+        raise ValueError(f"`throw` must be a bool; got {throw!r}.")
+    return _camera_matrix_lstsq(m, p, throw)
+
+
+@eqx.filter_jit  # one program per shape and `throw`; its error_if raised as equinox's
+# runtime error
+def _camera_matrix_lstsq(m, p, throw: bool):
+    finite = jnp.all(jnp.isfinite(m)) & jnp.all(jnp.isfinite(p))
+    # a non-finite input is swapped for a regular one before the sums (finite gradients)
+    m_safe = jnp.where(finite, m, jnp.arange(m.size, dtype=m.dtype).reshape(m.shape))
+    p_safe = jnp.where(finite, p, 0.0)
 
     def axis(x, y):
         # centred sums: the raw normal equations lose digits on offset, narrow data
@@ -38,22 +71,28 @@ def camera_matrix_lstsq(
         sxx = jnp.sum(dx * dx)
         # no variation: below what rounding the mean leaves (dtype-aware, not a fixed 1e-12)
         floor = n * (100.0 * jnp.finfo(x.dtype).eps * jnp.max(jnp.abs(x))) ** 2
-        sxx = eqx.error_if(
-            sxx,
-            ~(sxx > floor),
+        varies = sxx > floor
+        slope = jnp.sum(dx * dy) / jnp.where(varies, sxx, 1.0)
+        return slope, y_mean - slope * x_mean, varies
+
+    f, cx, ok_x = axis(m_safe[:, 0], p_safe[:, 0])
+    af, cy, ok_y = axis(m_safe[:, 1], p_safe[:, 1])
+    result = RESULTS.where(
+        finite,
+        RESULTS.where(ok_x & ok_y, RESULTS.successful, RESULTS.degenerate_points),
+        RESULTS.nonfinite_pixels,
+    )
+    theta = jnp.where(result == RESULTS.successful, jnp.stack([f, af, cx, cy]), jnp.nan)
+    if throw:
+        theta = eqx.error_if(
+            theta, ~finite, "camera_matrix_lstsq: a coordinate is not finite (NaN or inf)."
+        )
+        theta = eqx.error_if(
+            theta,
+            ~(ok_x & ok_y),
             "camera_matrix_lstsq: the normalized coordinates do not vary along an axis.",
         )
-        slope = jnp.sum(dx * dy) / sxx
-        return slope, y_mean - slope * x_mean
-
-    m, p = eqx.error_if(
-        (m, p),
-        ~(jnp.all(jnp.isfinite(m)) & jnp.all(jnp.isfinite(p))),
-        "camera_matrix_lstsq: a coordinate is not finite (NaN or inf).",
-    )
-    f, cx = axis(m[:, 0], p[:, 0])
-    af, cy = axis(m[:, 1], p[:, 1])
-    return jnp.stack([f, af, cx, cy])
+    return CameraFit(theta, result)
 
 
 def camera_matrix(theta: Float[ArrayLike, "4"]) -> Float[Array, "3 3"]:

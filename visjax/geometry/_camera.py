@@ -8,6 +8,9 @@ expressed in the camera frame (eq. (10)); $z$ is the depth along the optical axi
 Arrays of points have the point index first: shape (n, 2) or (n, 3).
 """
 
+from typing import final
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
@@ -130,29 +133,48 @@ def _normalized_to_pixel(m, A):
     return jnp.stack([u, v], axis=-1)
 
 
-def project(points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"]) -> Float[Array, "... 2"]:
-    """Project 3D points given in the camera frame to pixels (eqs. (10) and (15)).
+@final
+class Projection(eqx.Module):
+    """What `project` returns.
+
+    **Fields:** `pixels` (..., 2): the pixel coordinates, NaN for a point that could not be
+    projected (never a finite placeholder); `result`: a `RESULTS` item, `successful`, or
+    (with `throw=False`) `nonfinite_pixels` (a non-finite point), `behind_camera` (a depth
+    $z \\le 0$) or `invalid_intrinsics`.
+    """
+
+    pixels: Float[Array, "... 2"]
+    result: RESULTS
+
+
+def project(
+    points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"], *, throw: bool = True
+) -> Projection:
+    """Project 3D points given in the camera frame to pixels (Chitrakaran et al., eqs. (10)
+    and (15)).
 
     **Arguments:**
 
     - `points`: $\\bar m = [x, y, z]$ in the camera frame, shape (..., 3).
     - `A`: the intrinsic matrix.
+    - `throw`: if `True` (default), a point with depth $z \\le 0$ ("behind the camera"), a
+        non-finite point or an unusable `A` (non-finite, a zero focal length) raises at run
+        time; with `False` the failure is the `result` (those pixels NaN), so that one bad
+        frame of a `jax.vmap` batch leaves the others intact.
 
-    A point with depth $z \\le 0$ ("behind the camera"), a non-finite point or an unusable
-    `A` (non-finite, a zero focal length) raises at run time; `_project_checked` returns a
-    result code instead.
-
-    **Returns:** pixel coordinates, shape (..., 2).
+    **Returns:** a `Projection`: `pixels` (..., 2) and `result`.
     """
+    if not isinstance(throw, bool):
+        raise ValueError(f"`throw` must be a bool; got {throw!r}.")
     pixels, result = _project_checked(points, A)
-    return raise_or_keep(result, pixels, True)
+    return raise_or_keep(result, Projection(pixels, result), throw)
 
 
 def _project_checked(
     points: Float[ArrayLike, "... 3"], A: Float[ArrayLike, "3 3"]
 ) -> tuple[Float[Array, "... 2"], RESULTS]:
-    """`project` that never raises: returns `(pixels, result)`; the pixels of a point behind
-    the camera are NaN (never a finite placeholder)."""
+    """`(pixels, result)` of `project` without raising; the pixels of a point behind the
+    camera are NaN (never a finite placeholder)."""
     return _project_arrays(_check_last(points, 3, "points"), _check_A(A))
 
 
@@ -171,7 +193,8 @@ def _project_arrays(points, A):
     z_safe = jnp.where(z > 0.0, z, 1.0)
     m = points[..., :2] / z_safe[..., None]
     pixels = _normalized_to_pixel(m, A)
-    pixels = jnp.where((z > 0.0)[..., None], pixels, jnp.nan)
+    ok = (z > 0.0) & jnp.all(jnp.isfinite(points), axis=-1)  # a point's pixel whole or NaN
+    pixels = jnp.where(ok[..., None], pixels, jnp.nan)
     pixels = jnp.where(intrinsics_ok(A), pixels, jnp.nan)
     return pixels, result
 

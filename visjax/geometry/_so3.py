@@ -9,11 +9,14 @@ Source: Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's v
 a fixed camera*, eqs. (24)-(31) and (A.3).
 """
 
+from typing import final
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._results import RESULTS
 from .._small import det3, dot, from_rows, mm, rows, sall, smax, smm, sskew, ssum
 from .._util import as_float, check_shape
 
@@ -123,7 +126,20 @@ def _so3_exp(omega):
     return jnp.eye(3, dtype=omega.dtype) + a * W + b * mm(W, W)
 
 
-def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
+@final
+class RotationVector(eqx.Module):
+    """What `so3_log` returns.
+
+    **Fields:** `omega` (3,): the rotation vector $u\\theta$, NaN where it is not defined
+    (never a finite placeholder); `result`: a `RESULTS` item, `successful`, or (with
+    `throw=False`) `nonfinite_matrix` (a non-finite entry in `R`) or `not_a_rotation`.
+    """
+
+    omega: Float[Array, "3"]
+    result: RESULTS
+
+
+def so3_log(R: Float[ArrayLike, "3 3"], *, throw: bool = True) -> RotationVector:
     """The logarithm of a rotation matrix as a rotation vector $e_\\omega = u\\theta$.
 
     Implements Chitrakaran et al., eqs. (24) and (28):
@@ -140,18 +156,43 @@ def so3_log(R: Float[ArrayLike, "3 3"]) -> Float[Array, "3"]:
     **Arguments:**
 
     - `R`: a rotation matrix.
+    - `throw`: if `True` (default), a finite matrix that is not a rotation ($R^TR \\ne I$
+        or $\\det R \\ne 1$ beyond $10\\sqrt{\\epsilon}$) raises at run time; with `False`
+        it is the result `not_a_rotation` (and `omega` NaN). A non-finite entry is NaN in,
+        NaN out, with the result `nonfinite_matrix` either way (it never raises: a failed
+        frame upstream has already said why).
 
-    **Returns:** the rotation vector $u\\theta$ with $\\|u\\theta\\| \\in [0, \\pi]$; NaN if `R`
-    has a non-finite entry (NaN in, NaN out). A finite matrix that is not a rotation raises
-    at run time.
+    **Returns:** a `RotationVector`: `omega`, $u\\theta$ with $\\|u\\theta\\| \\in [0, \\pi]$,
+    and `result`.
     """
+    if not isinstance(throw, bool):
+        raise ValueError(f"`throw` must be a bool; got {throw!r}.")
     R = as_float(R)
     check_shape(R, (3, 3), "R")
-    return _so3_log(R)
+    return _so3_log_result(R, throw)
 
 
-@eqx.filter_jit  # its error_if, raised as equinox's runtime error
-def _so3_log(R):
+@eqx.filter_jit  # one program per shape, dtype and `throw`; its error_if raised as
+# equinox's runtime error
+def _so3_log_result(R, throw: bool):
+    omega, rotation = _so3_log_checked(R)
+    finite = sall(jnp.isfinite(R))
+    result = RESULTS.where(
+        finite,
+        RESULTS.where(rotation, RESULTS.successful, RESULTS.not_a_rotation),
+        RESULTS.nonfinite_matrix,
+    )
+    if throw:  # only a finite non-rotation raises (NaN in, NaN out)
+        omega = eqx.error_if(
+            omega, ~rotation, "so3_log: the matrix is not a rotation (R^T R != I or det R != 1)."
+        )
+    return RotationVector(jnp.where(rotation, omega, jnp.nan), result)
+
+
+@jax.jit
+def _so3_log_checked(R):
+    """`(omega, is_rotation)`: the rotation vector (NaN for a non-finite `R`) and whether a
+    finite `R` is a rotation within the tolerance (`True` for a non-finite one)."""
     dtype = R.dtype
     w = vee(R)  # = sin(theta) u
     c = jnp.clip(0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0), -1.0, 1.0)  # = cos(theta)
@@ -197,11 +238,7 @@ def _so3_log(R):
     # ~1e-15 and ~1e-6)
     tol = 10.0 * float(jnp.finfo(dtype).eps) ** 0.5
     off = smax(jnp.abs(mm(R.T, R) - jnp.eye(3, dtype=dtype))) + jnp.abs(det3(R) - 1.0)
-    return eqx.error_if(
-        out,
-        jax.lax.stop_gradient(finite & (off > tol)),
-        "so3_log: the matrix is not a rotation (R^T R != I or det R != 1).",
-    )
+    return out, jax.lax.stop_gradient(~(finite & (off > tol)))
 
 
 def _L_omega_coefficient(t2):

@@ -39,6 +39,14 @@ _DATA_RESULT = (
     "an error at least `visjax.studies.QUALITY_RATIO` times the trivial estimate's, "
     "`quality`)",
 )
+_INNOVATION = (
+    "the observer's output error against the noise level the data imply, over the second "
+    "half (`visjax.studies.judge_innovation`): `output_rms` and `noise_rms` per measured "
+    "output, `ratio` (the worst `output_rms / noise_rms`), `threshold` "
+    "(`visjax.studies.INNOVATION_GATE`), `samples`, `flag` (`ok` or `innovation_too_large`, "
+    "a printed warning that leaves the `result` as it is; then also `quality.flag` where "
+    "the truth's verdict is `ok`)"
+)
 _DROPPED = (
     "float",
     "the fraction of the file's frames with a feature missing (`dropped_fraction()`), or, "
@@ -98,7 +106,8 @@ SUMMARIES = {
             "dict",
             "with the truth: the worst RMS error against zero velocity's over the same "
             "window (`trivial`, `ratio_to_trivial`, per component `ratios`, `threshold`, "
-            "`flag`: `ok` or `worse_than_trivial`, then also the `result`)",
+            "`flag`: `ok` or `worse_than_trivial`, then also the `result`); with or without "
+            "it, for a run that did not stop, `innovation`: " + _INNOVATION,
         ),
         "dropped_fraction?": _DROPPED,
         "failed_sample?": _FAILED_SAMPLE,
@@ -135,7 +144,8 @@ SUMMARIES = {
         "quality?": (
             "dict",
             "with the truth: the worst RMS error against the initial depth guess held on "
-            "each frame's ray, over the same window (as for `velocity_data`)",
+            "each frame's ray, over the same window (as for `velocity_data`); `innovation` "
+            "as for `velocity_data`, the outputs the frame's normalized image coordinates",
         ),
         "dropped_fraction?": _DROPPED,
         "failed_sample?": _FAILED_SAMPLE,
@@ -182,7 +192,9 @@ SUMMARIES = {
             "dict",
             "with the truth, for a problem with a trivial estimate (`studies.quality`): "
             "`trivial_estimate`, `metric`, `trivial` (its value), `ratio_to_trivial`, "
-            "`threshold`, `flag` (`ok`, or `worse_than_trivial`, then also the `result`)",
+            "`threshold`, `flag` (`ok`, or `worse_than_trivial`, then also the `result`); "
+            "for an observer with an output-error check (`problem.innovation`), with or "
+            "without the truth, `innovation`: " + _INNOVATION,
         ),
     },
     "compare": {

@@ -279,7 +279,7 @@ class SerialChain(eqx.Module):
     def _solve_pose(self, R_target, p_target, q, steps, tol):
         def error(q):
             R, p = self.tool_pose(q)
-            return jnp.concatenate([p_target - p, so3_log(R_target @ R.T)])
+            return jnp.concatenate([p_target - p, so3_log(R_target @ R.T).omega])
 
         def step(carry, _):
             q, result = carry

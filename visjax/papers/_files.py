@@ -159,6 +159,7 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
         lowpass,
         lowpass_delay,
         run,
+        velocity_innovation,
         velocity_stream,
     )
     from ..io import VelocityData
@@ -183,7 +184,7 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
     # saved about once per sample interval (a gain whose bound needs a short step would
     # otherwise save every one of its steps: hundreds of MB for seconds of data)
     every = 1 if dt is None else max(1, round(float(np.median(np.diff(data.t))) / dt))
-    sol = run(est, stream, dt=dt, saveat=SaveAt(every=every), throw=False)
+    sol = run(est, stream, dt=dt, saveat=SaveAt(every=every, diagnostics=True), throw=False)
     ts = np.asarray(sol.ts)
     v_hat = np.asarray(sol.outputs.v_hat)
     body = {
@@ -204,6 +205,10 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
         body["filter_hz"] = filter_hz
         body["filter_delay_s"] = lowpass_delay(filter_hz)
     shown, truth = arrays.get("v_filtered", v_hat), None
+    innovation = None
+    if "failed_sample" not in body:  # the check without the truth, over the second half
+        half = float(data.t[0] + 0.5 * (data.t[-1] - data.t[0]))
+        innovation = velocity_innovation(stream, sol, est, t_start=half, step=dt)
     if data.velocity is not None and "failed_sample" not in body:  # no error of a frozen state
         # the truth at the integration grid: the sample held at each grid time
         k = np.searchsorted(np.asarray(data.t), ts + 1e-9, side="right") - 1
@@ -214,7 +219,22 @@ def velocity_from_file(path, filter_hz=None) -> FileEstimate:
         if failure is None and body["quality"]["flag"] != "ok":
             body["result"] = body["quality"]["flag"]
             failure = f"velocity: the result is {body['result']}: {_quality_words(body)}"
+    _innovation(body, innovation)
     return FileEstimate(body, arrays, ts, shown, truth, failure)
+
+
+def _innovation(body: dict, innovation) -> None:
+    """The observer's output error against the noise its data imply, into `body["quality"]`
+    (`innovation`, `visjax.studies.judge_innovation`; `flag` its flag where the rest is
+    `"ok"` or absent): a warning, not a result code."""
+    from ..studies import judge_innovation
+
+    if innovation is None:
+        return
+    quality = body.setdefault("quality", {})
+    quality["innovation"] = judge_innovation(innovation)
+    if quality.get("flag", "ok") == "ok":
+        quality["flag"] = quality["innovation"]["flag"]
 
 
 def _quality(rms, trivial, what: str) -> dict:
@@ -226,6 +246,16 @@ def _quality(rms, trivial, what: str) -> dict:
     judged = judge(max(rms), max(trivial), trivial_estimate=what, metric="rms_worst")
     judged["ratios"] = [r / t if t > 0 else None for r, t in zip(rms, trivial)]
     return judged
+
+
+def _innovation_warning(body) -> list[str]:
+    """A printed warning where the observer's output error is past its gate."""
+    from ..studies import innovation_line
+
+    judged = body.get("quality", {}).get("innovation")
+    if judged is None or judged["flag"] == "ok":
+        return []
+    return [f"warning: {judged['flag']}: {innovation_line(judged)}"]
 
 
 def _quality_words(body) -> str:
@@ -240,7 +270,13 @@ def moving_point_from_file(path) -> FileEstimate:
     `moving_point_observer_for_data` (the LMI design for the file's camera motion), dropped
     frames extrapolated from the last two seen, 1 kHz on the held frames; the estimate at
     each frame time (the grid point at or just after it)."""
-    from ..estimators import SaveAt, integration_step, moving_point_stream, run
+    from ..estimators import (
+        SaveAt,
+        integration_step,
+        moving_point_innovation,
+        moving_point_stream,
+        run,
+    )
     from ..io import MovingPointData
     from ._moving_point import moving_point_observer_for_data
 
@@ -277,6 +313,14 @@ def moving_point_from_file(path) -> FileEstimate:
         if failure is None and body["quality"]["flag"] != "ok":
             body["result"] = body["quality"]["flag"]
             failure = f"moving_point: the result is {body['result']}: {_quality_words(body)}"
+    if "failed_sample" not in body:  # the check without the truth, over the second half
+        half = float(t[0] + 0.5 * (t[-1] - t[0]))
+        _innovation(
+            body,
+            moving_point_innovation(
+                t, data.pixels, data.A, sol.ts, sol.outputs.x_hat, t_start=half
+            ),
+        )
     arrays = {"t": t, "position": position, "x_hat": x_hat}
     return FileEstimate(body, arrays, t, position, truth, failure)
 
@@ -383,6 +427,7 @@ def velocity_file_reproduction(path, filter_hz=None, *, quiet=True, write=None) 
         _coverage_line(body),
         *_last_half_lines(body, "RMS error", DOF_NAMES),
         *([f"quality: {_quality_words(body)}"] if "quality" in body else []),
+        *_innovation_warning(body),
     ]
     rep = _file_reproduction(
         run, "velocity", functools.partial(plot_velocity, title=title), lines, write
@@ -411,6 +456,7 @@ def moving_point_file_reproduction(path, *, quiet=True, write=None) -> Reproduct
         _coverage_line(body),
         *_last_half_lines(body, "RMS position error (m)", "XYZ"),
         *([f"quality: {_quality_words(body)}"] if "quality" in body else []),
+        *_innovation_warning(body),
     ]
     rep = _file_reproduction(
         run, "structure", functools.partial(plot_structure, title=title), lines, write

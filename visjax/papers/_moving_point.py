@@ -173,6 +173,20 @@ class MovingPointProblem(AbstractProblem):
         rms = WindowRMS(*self.window_s).over(self.frame_ts, position, truth).rms * self.to_m
         return {"rms_worst": jnp.max(rms), "rms": rms}
 
+    def innovation(self, method, params, solution, inputs):
+        """The observer's output error at each frame, $y - \\hat y$ (normalized image
+        coordinates), against the noise its frames imply (`estimators.moving_point_innovation`)
+        over the scoring window; `None` for the baselines and a solution saved without its
+        time series."""
+        from ..estimators import moving_point_innovation
+
+        if method != "estimator" or getattr(solution, "outputs", None) is None:
+            return None
+        return moving_point_innovation(
+            self.frame_ts, inputs["pixels"], self.Kc, solution.ts, solution.outputs.x_hat,
+            t_start=self.window_s[0], t_end=self.window_s[1] + 1e-9,
+        )  # fmt: skip
+
     def updates(self, method):
         return int(self.frame_ts.shape[0])
 

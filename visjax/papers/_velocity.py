@@ -145,7 +145,7 @@ class VelocityProblem(AbstractProblem):
             return run(
                 est,
                 stream,
-                saveat=SaveAt(outputs=outputs),
+                saveat=SaveAt(outputs=outputs, diagnostics=outputs),
                 reducer=reducer,
                 adjoint=self.adjoint,
                 throw=False,
@@ -266,6 +266,27 @@ class VelocityProblem(AbstractProblem):
             WindowRMS(w.t_start, w.t_end).over(self.ts, jnp.zeros_like(self.truth), self.truth).rms
         )
         return {"rms_worst": jnp.max(rms), "rms": rms}
+
+    def innovation(self, method, params, solution, inputs):
+        """The estimator's output error $\\tilde e$ against the noise its measurements imply
+        (`estimators.velocity_innovation`) over the scoring window; `None` for the
+        baselines (not observers of $e$) and a solution saved without its time series."""
+        from ..estimators import VelocityEstimator, velocity_innovation, velocity_stream
+
+        if method != "estimator" or getattr(solution, "diagnostics", None) is None:
+            return None
+        pixels = inputs["pixels"]
+        stream = velocity_stream(
+            self.ts, pixels, self._camera(pixels), dropped=self._dropped(), throw=False,
+            chunk=self.chunk,
+        )  # fmt: skip
+        params = self.resolve(params)
+        est = VelocityEstimator(
+            K=params["K"] * params["K_scale"], rho=params["rho"] * params["rho_scale"]
+        )
+        t0 = self.ts[0]
+        a, b = self.window
+        return velocity_innovation(stream, solution, est, t_start=t0 + a, t_end=t0 + b + 1e-9)
 
     def uncertainty(self, method, solution):
         """`rms_std` (6,): per degree of freedom, the fit's predicted standard deviation of

@@ -396,6 +396,7 @@ class HomographyProblem(AbstractProblem):
     methods: ClassVar[tuple] = ("estimator", "gyro", "dlt", "ransac")
     metric: ClassVar[str] = "error"
     label: ClassVar[str] = "RMS of |H_hat H^-1 - I| over the second half (-)"
+    trivial_label: ClassVar[str] = "the identity (the reference image's homography)"
     grid: ClassVar[str] = "k_P=3:200:5"
     title: ClassVar[str] = "homography of a planar target (Hamel et al.)"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
@@ -482,6 +483,12 @@ class HomographyProblem(AbstractProblem):
         half = err[err.shape[0] // 2 :]
         return {"error": jnp.sqrt(jnp.mean(half**2)), "final_error": err[-1]}
 
+    def trivial(self):
+        """The metrics of the identity held (the observer's start: the reference image's
+        homography), scored as every method is."""
+        H = jnp.broadcast_to(jnp.eye(3, dtype=self.scene.H.dtype), self.scene.H.shape)
+        return self.metrics("dlt", _Homographies(H))
+
     def figure(self, method, solution):
         import matplotlib.pyplot as plt
 
@@ -494,6 +501,10 @@ class HomographyProblem(AbstractProblem):
         ax.set_title(f"{self.title}: {method}, {self.noise_px:g} px")
         fig.tight_layout()
         return fig
+
+
+class _Homographies(eqx.Module):
+    H: jax.Array  # (N, 3, 3): what `HomographyProblem.metrics` reads of a per-frame method
 
 
 def _first_failure_over(results):
@@ -519,6 +530,7 @@ class VelocityFrontEndProblem(AbstractProblem):
     the decomposition, $J$) is the velocity problem's. Metric: the velocity problem's."""
 
     methods: ClassVar[tuple] = ("observer", "four_point")
+    trivial_label: ClassVar[str] = "zero velocity"
     grid: ClassVar[str] = "k_P=10:400:4,k_I=100:100000:4"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 
@@ -581,6 +593,10 @@ class VelocityFrontEndProblem(AbstractProblem):
 
     def metrics(self, method, solution):
         return self.base.metrics("estimator", solution)
+
+    def trivial(self):
+        """The velocity problem's: zero velocity."""
+        return self.base.trivial()
 
     def figure(self, method, solution):
         return self.base.figure("estimator", solution)

@@ -1060,7 +1060,7 @@ def testbed_studies(runs, names, units, duration, seed, *, quiet=True, write=Non
         cam = base.position[base.frame_index]
         m = cam[:, :2] / cam[:, 2:]
         ok = np.all(np.isfinite(base.pixels), axis=1)
-        theta = np.asarray(camera_matrix_lstsq(m[ok], base.pixels[ok]))
+        theta = np.asarray(camera_matrix_lstsq(m[ok], base.pixels[ok]).theta)
         K_ls = np.asarray(camera_matrix(theta))
         tables = {}
         for set_name, table, thesis in (

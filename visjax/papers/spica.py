@@ -363,6 +363,7 @@ class PointDepthProblem(AbstractProblem):
 
     methods: ClassVar[tuple] = ("estimator", "least_squares", "ekf")
     metric: ClassVar[str] = "depth_error"
+    trivial_label: ClassVar[str] = "the initial depth guess"
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
@@ -492,6 +493,15 @@ class PointDepthProblem(AbstractProblem):
         first = jnp.argmax(settled)
         time = jnp.where(jnp.any(settled), ts[first] - ts[0], ts[-1] - ts[0])
         return {"depth_error": jnp.max(err[-1]), "time_to_5pct": time}
+
+    def trivial(self):
+        """The metrics of the initial depth guess held, $1/\\chi_0$ (the default `chi0`)
+        for every point at every sample, scored as every method is."""
+        truth = self._truth()
+        guess = jnp.full_like(truth, 1.0 / self.parameters()["chi0"].value)
+        return self.metrics("least_squares", LeastSquaresDepth(
+            ts=self.scene.ts, depth=guess, result=RESULTS.successful, depth_std=guess
+        ))  # fmt: skip
 
     def uncertainty(self, method, solution):
         """`depth_error_std`: the largest over the points of the predicted standard

@@ -29,7 +29,7 @@ def fixed_camera_pixels(
     points = as_float(points)
     check_shape(points, (None, 3), "points")
     world = body.x[:, None, :] + jnp.einsum("nij,kj->nki", body.R, points)
-    return jax.vmap(lambda P: project(P, A))(world)
+    return jax.vmap(lambda P: project(P, A).pixels)(world)
 
 
 def platform_camera_pixels(
@@ -47,7 +47,7 @@ def platform_camera_pixels(
 
     def one(R, x):
         m_bar = jax.vmap(lambda w: feature_in_camera(w, R, x, R_c, x_c))(points)
-        return project(m_bar, A)
+        return project(m_bar, A).pixels
 
     return jax.vmap(one)(R_b, x_b)
 

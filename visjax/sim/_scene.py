@@ -167,7 +167,7 @@ def spline_trajectory(
 @jax.jit
 def _spline(knots, R_k, x_k, ts):
     R0 = R_k[0]
-    phi = jax.vmap(lambda R: so3_log(R0.T @ R))(R_k)
+    phi = jax.vmap(lambda R: so3_log(R0.T @ R).omega)(R_k)
     values = jnp.concatenate([x_k, phi], axis=1)
     slopes = _natural_spline_slopes(knots, values)
 

@@ -15,6 +15,7 @@ from ._parts import (
     merge_parts as merge_parts,
 )
 from ._problem import (
+    INNOVATION_GATE as INNOVATION_GATE,
     QUALITY_RATIO as QUALITY_RATIO,
     AbstractProblem as AbstractProblem,
     Evaluation as Evaluation,
@@ -24,7 +25,9 @@ from ._problem import (
     evaluate as evaluate,
     fingerprint as fingerprint,
     held as held,
+    innovation_line as innovation_line,
     judge as judge,
+    judge_innovation as judge_innovation,
     quality as quality,
     quality_line as quality_line,
     solution as solution,

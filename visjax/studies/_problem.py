@@ -78,7 +78,9 @@ class AbstractProblem(eqx.Module):
     parameters are multipliers, the absolute gains); `checks(params)` (extra checks of a
     chosen point, e.g. a stability certificate, JSON-able, merged into the sweep's and
     tune's summaries) and `check_lines(summary)` (them, as printed lines);
-    `uncertainty(method, solution)` (the predicted standard deviations of what the metrics
+    `innovation(method, params, solution, inputs)` (an observer's output error against the noise
+    the data imply, `INNOVATION_GATE`: the check without the truth); `uncertainty(method,
+    solution)` (the predicted standard deviations of what the metrics
     score, from a batch method's covariance; `compare` reports them); `trivial()` (the
     metrics of the trivial estimate, what one would answer knowing nothing: zero velocity,
     the initial depth guess; `run` and `compare` flag an estimate no better than it,
@@ -152,6 +154,15 @@ class AbstractProblem(eqx.Module):
         `run` reports it with the result `worse_than_trivial` and `compare` counts it
         (`quality`). Default: none (no such check)."""
         return {}
+
+    def innovation(self, method: str, params: Mapping[str, Any], solution, inputs):
+        """The output error of an observer against the noise level the data imply
+        (`visjax.estimators.Innovation`), for a solution of `method` with `params` made
+        with `outputs=True` on `inputs`: a check of the run without the truth. `run`
+        reports it in `quality` (`innovation`) and warns where its `ratio` exceeds
+        `INNOVATION_GATE`. Default: `None` (no such check: a method that is not an
+        observer)."""
+        return None
 
     def figure(self, method: str, solution):
         """A figure of one solution (made with `outputs=True`): each saved output field
@@ -443,18 +454,52 @@ QUALITY_RATIO = 1.0
 nothing."""
 
 
-def quality(problem: AbstractProblem, values: Mapping[str, Any], trivial=None) -> dict | None:
+INNOVATION_GATE = 3.0
+"""An observer whose output error is more than this multiple of the noise level its data
+imply (`visjax.estimators.Innovation.ratio`, the worst output) is reported with a warning,
+`innovation_too_large`: it lags its measurements or has lost them. Three standard deviations,
+the usual gate of an innovation test. A check without the truth, and a one-sided one: an
+output error within the gate does not show that the estimate is right (the velocity
+estimator's chatter, in its rates, leaves its output error small), and on noise-free data
+any lag exceeds it."""
+
+
+def quality(
+    problem: AbstractProblem, values: Mapping[str, Any], trivial=None, innovation=None
+) -> dict | None:
     """How a run's metrics (`values`, as `metrics` returns them) compare with the trivial
     estimate's (`problem.trivial()`): `judge`'s verdict on the headline metric (its
-    largest entry); `None` for a problem without a trivial estimate or truth. `trivial`:
+    largest entry); with `innovation` (`problem.innovation(...)`, the check without the
+    truth), `judge_innovation`'s verdict under the key `innovation`, and the first flag
+    that is not `"ok"` as `flag`. `None` for a problem with neither. `trivial`:
     `problem.trivial()` computed once (for many runs of one problem)."""
     if trivial is None:
         trivial = problem.trivial() if problem.scored else {}
-    if problem.metric not in trivial or problem.metric not in values:
-        return None
-    value = float(np.max(np.asarray(values[problem.metric], float)))
-    base = float(np.max(np.asarray(trivial[problem.metric], float)))
-    return judge(value, base, trivial_estimate=problem.trivial_label, metric=problem.metric)
+    judged = {}
+    if problem.metric in trivial and problem.metric in values:
+        value = float(np.max(np.asarray(values[problem.metric], float)))
+        base = float(np.max(np.asarray(trivial[problem.metric], float)))
+        judged = judge(value, base, trivial_estimate=problem.trivial_label, metric=problem.metric)
+    if innovation is not None:
+        judged["innovation"] = judge_innovation(innovation)
+        if judged.get("flag", "ok") == "ok":
+            judged["flag"] = judged["innovation"]["flag"]
+    return judged or None
+
+
+def judge_innovation(innovation) -> dict:
+    """An observer's `visjax.estimators.Innovation` judged: `{"output_rms", "noise_rms",
+    "ratio", "threshold", "flag", "samples"}`, `flag` `"innovation_too_large"` when the
+    ratio exceeds `INNOVATION_GATE` or is not finite, else `"ok"`."""
+    ratio = float(np.asarray(innovation.ratio))
+    return {
+        "output_rms": np.asarray(innovation.output_rms, float).tolist(),
+        "noise_rms": np.asarray(innovation.noise_rms, float).tolist(),
+        "ratio": ratio if np.isfinite(ratio) else None,
+        "threshold": INNOVATION_GATE,
+        "samples": int(np.asarray(innovation.samples)),
+        "flag": "ok" if np.isfinite(ratio) and ratio <= INNOVATION_GATE else "innovation_too_large",
+    }
 
 
 def judge(value: float, trivial: float, *, trivial_estimate: str, metric: str) -> dict:
@@ -475,13 +520,32 @@ def judge(value: float, trivial: float, *, trivial_estimate: str, metric: str) -
 
 
 def quality_line(judged: Mapping[str, Any]) -> str:
-    """`judge`'s verdict as one printed line."""
+    """`judge`'s verdict as one printed line; `quality`'s, both parts, `; `-separated."""
+    if "innovation" in judged:
+        rest = {k: v for k, v in judged.items() if k != "innovation"}
+        lines = [quality_line(rest)] if "ratio_to_trivial" in rest else []
+        return "; ".join([*lines, innovation_line(judged["innovation"])])
     ratio = judged["ratio_to_trivial"]
     times = "not finite" if ratio is None else f"{ratio:.3g} times"
     verdict = "no better than it: not to be trusted" if judged["flag"] != "ok" else "below it"
     return (
         f"{judged['metric']} is {times} that of {judged['trivial_estimate']} "
         f"({judged['trivial']:.4g}): {verdict} (threshold {judged['threshold']:g})"
+    )
+
+
+def innovation_line(judged: Mapping[str, Any]) -> str:
+    """`judge_innovation`'s verdict as one printed line."""
+    ratio = judged["ratio"]
+    times = "not finite" if ratio is None else f"{ratio:.3g} times"
+    verdict = (
+        "within it"
+        if judged["flag"] == "ok"
+        else "the observer lags its measurements or has lost them: not to be trusted"
+    )
+    return (
+        f"output error {times} the noise level the data imply (worst output; gate "
+        f"{judged['threshold']:g}): {verdict}"
     )
 
 
