@@ -331,6 +331,8 @@ def _walk(tree, found: list[str], where="") -> None:
                 found.append(f"{here} = {v:.3f}")
             elif k == "worse_than_trivial" and isinstance(v, dict) and any(v.values()):
                 found.append(f"{here} = {v}")
+            elif k == "flag" and v in ("worse_than_trivial", "innovation_too_large"):
+                found.append(f"{here} = {v}")
             else:
                 _walk(v, found, here)
     elif isinstance(tree, list):
@@ -1647,6 +1649,19 @@ data_probe("structure_truth_behind_camera", "plausibility", "s", _behind)
 data_probe("velocity_example_noise_and_dropouts", "quality", "v", _missing_two_percent)
 data_probe("velocity_collinear_from_frame_100", "quality", "v", _collinear_from(100))
 data_probe("velocity_K_2e6", "quality", "v", _set("K", np.full(6, 2e6)))
+
+
+def _lagging_gains(a):
+    """Gains K and rho 100 times below eq. (63)'s, no truth in the file: the estimator lags
+    its measurements (its output error far above the noise), which only the innovation
+    check can say."""
+    from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63
+
+    a["K"], a["rho"] = np.asarray(K_EQ63) / 100, np.asarray(RHO_EQ63) / 100
+    a.pop("velocity")
+
+
+data_probe("velocity_lagging_gains_no_truth", "quality", "v", _lagging_gains)
 argv_probe(
     "compare_velocity_noise_0_5",
     "quality",
