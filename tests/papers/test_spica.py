@@ -383,3 +383,21 @@ def test_the_trivial_estimate_is_the_initial_depth_guess():
         got = p.trivial()
         np.testing.assert_allclose(got["depth_error"], np.max(np.abs(1.5 / depth - 1)), rtol=1e-12)
         assert float(got["time_to_5pct"]) == pytest.approx(float(p.scene.ts[-1] - p.scene.ts[0]))
+
+
+def test_innovation_check_of_the_observer():
+    """Issue 44: the observer's output error xi = s - s_hat against the noise of the
+    measurements (`PointDepthProblem.innovation`): within `INNOVATION_GATE` at the default
+    gains with 0.5 px of noise; past it with the inverse depth's gain alpha = 1 (1000 times
+    smaller: the depth stays near its wrong initial guess, and s_hat, driven by it, leaves
+    the measurements)."""
+    from visjax.studies import INNOVATION_GATE
+
+    p = spica.point_depth_problem(noise_px=0.5, duration=1.0)
+    inputs = p.inputs(jax.random.key(2))
+    ratios = {}
+    for alpha in (1000.0, 1.0):
+        params = p.resolve({"alpha": alpha})
+        sol = p.solve("estimator", params, inputs, outputs=True)
+        ratios[alpha] = float(p.innovation("estimator", params, sol, inputs).ratio)
+    assert ratios[1000.0] < INNOVATION_GATE < ratios[1.0], ratios

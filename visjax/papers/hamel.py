@@ -483,6 +483,23 @@ class HomographyProblem(AbstractProblem):
         half = err[err.shape[0] // 2 :]
         return {"error": jnp.sqrt(jnp.mean(half**2)), "final_error": err[-1]}
 
+    def innovation(self, method, params, solution, inputs):
+        """The observers' output error over the second half: each current bearing $p_i$
+        against the one the estimate predicts from the reference, $\\hat H^{-1}\\mathring
+        p_i$ normalized, against the noise the bearings imply (`estimators.innovation`);
+        `None` for the per-frame fits."""
+        from ..estimators import innovation
+
+        if method not in ("estimator", "gyro"):
+            return None
+        sc = self.scene
+        p = unit_bearings(inputs["pixels"], sc.K)
+        p_ref = unit_bearings(inputs["reference"], sc.K)
+        predicted = jax.vmap(lambda H: _bearings(jnp.linalg.inv(H), p_ref))(solution.outputs.H)
+        n = sc.ts.shape[0]
+        y = p.reshape(n, -1)
+        return innovation(y, y - predicted.reshape(n, -1), jnp.arange(n) >= n // 2)
+
     def trivial(self):
         """The metrics of the identity held (the observer's start: the reference image's
         homography), scored as every method is."""

@@ -417,7 +417,7 @@ class PointDepthProblem(AbstractProblem):
             stream = point_depth_stream(
                 sc.ts, inputs, sc.twists, sc.K, projection=self.projection, throw=False
             )
-            return run(observer, stream, throw=False)
+            return run(observer, stream, saveat=SaveAt(states=outputs), throw=False)
 
         if method == "ekf":
             return self._ekf(params, inputs)
@@ -502,6 +502,23 @@ class PointDepthProblem(AbstractProblem):
         return self.metrics("least_squares", LeastSquaresDepth(
             ts=self.scene.ts, depth=guess, result=RESULTS.successful, depth_std=guess
         ))  # fmt: skip
+
+    def innovation(self, method, params, solution, inputs):
+        """The observer's output error $\\xi = s - \\hat s$ (every point's measured
+        coordinates) over the second half, against the noise its measurements imply
+        (`estimators.innovation`); `None` for the baselines and a solution saved without
+        its states."""
+        from ..estimators import innovation
+
+        if method != "estimator" or getattr(solution, "states", None) is None:
+            return None
+        sc = self.scene
+        stream = point_depth_stream(
+            sc.ts, inputs, sc.twists, sc.K, projection=self.projection, throw=False
+        )
+        n = sc.ts.shape[0]
+        s, s_hat = stream.ys.s.reshape(n, -1), solution.states.s_hat.reshape(n, -1)
+        return innovation(s, s - s_hat, jnp.arange(n) >= n // 2)
 
     def uncertainty(self, method, solution):
         """`depth_error_std`: the largest over the points of the predicted standard
