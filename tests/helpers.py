@@ -174,3 +174,15 @@ def check_testbed_tracking(r):
     assert np.all(np.isfinite(r.pixels))
     assert np.linalg.norm(r.rms) < 2 * np.linalg.norm(r.rms_ideal)
     assert np.all(np.isfinite(r.estimate)) and np.all(np.isfinite(r.rms_frames))
+
+
+def innovation_ratios(problem, key, parameter: str, values, method: str = "estimator"):
+    """`problem.innovation(...).ratio` of `method` on one draw (`key`), at each value of one
+    parameter (the others at their defaults): value -> ratio."""
+    inputs = problem.inputs(key)
+    out = {}
+    for value in values:
+        params = problem.resolve({parameter: value})
+        sol = problem.solve(method, params, inputs, outputs=True)
+        out[value] = float(problem.innovation(method, params, sol, inputs).ratio)
+    return out

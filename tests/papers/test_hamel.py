@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tests.helpers import central_difference
+from tests.helpers import central_difference, innovation_ratios
 from visjax import RESULTS, studies
 from visjax.cli import main
 from visjax.estimators import SaveAt, run
@@ -309,11 +309,6 @@ def test_innovation_check_of_the_observers(tracking):
     from visjax.studies import INNOVATION_GATE
 
     noisy = hamel.homography_problem(noise_px=0.5, duration=1.0, rate_hz=500.0)
-    inputs = noisy.inputs(jax.random.key(1))
-    ratios = {}
-    for k_P in (100.0, 0.1):
-        params = noisy.resolve({"k_P": k_P})
-        sol = noisy.solve("estimator", params, inputs, outputs=True)
-        ratios[k_P] = float(noisy.innovation("estimator", params, sol, inputs).ratio)
+    ratios = innovation_ratios(noisy, jax.random.key(1), "k_P", (100.0, 0.1))
     assert ratios[100.0] < INNOVATION_GATE < ratios[0.1], ratios
-    assert noisy.innovation("dlt", noisy.resolve({}), None, inputs) is None
+    assert noisy.innovation("dlt", noisy.resolve({}), None, None) is None

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tests.helpers import central_difference
+from tests.helpers import central_difference, innovation_ratios
 from visjax import RESULTS, studies
 from visjax.cli import main
 from visjax.estimators import SaveAt, run
@@ -394,10 +394,5 @@ def test_innovation_check_of_the_observer():
     from visjax.studies import INNOVATION_GATE
 
     p = spica.point_depth_problem(noise_px=0.5, duration=1.0)
-    inputs = p.inputs(jax.random.key(2))
-    ratios = {}
-    for alpha in (1000.0, 1.0):
-        params = p.resolve({"alpha": alpha})
-        sol = p.solve("estimator", params, inputs, outputs=True)
-        ratios[alpha] = float(p.innovation("estimator", params, sol, inputs).ratio)
+    ratios = innovation_ratios(p, jax.random.key(2), "alpha", (1000.0, 1.0))
     assert ratios[1000.0] < INNOVATION_GATE < ratios[1.0], ratios
