@@ -46,6 +46,39 @@ def test_imports_flow_down_the_layers():
             assert used <= allowed, (path.name, used - allowed)
 
 
+def _private_imports(path: pathlib.Path) -> list[str]:
+    """The modules of another subpackage that `path` imports by a private name
+    (`from ..studies._parts import ...`, `from .io._staging import ...`): a subpackage's
+    private modules are its own (the shared bottom modules `visjax._*` excepted)."""
+    rel = path.relative_to(PACKAGE).parts
+    own = rel[0] if len(rel) > 1 else None
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.ImportFrom) and node.module):
+            continue
+        if node.level >= 1:
+            # resolve the relative import against the package of `path`
+            base = list(rel[:-1])[: len(rel) - node.level] if node.level <= len(rel) - 1 else []
+            parts = base + node.module.split(".")
+        elif node.module.startswith("visjax."):
+            parts = node.module.split(".")[1:]
+        else:
+            continue
+        if len(parts) >= 2 and parts[0] != own and parts[1].startswith("_"):
+            found.append(".".join(parts))
+    return found
+
+
+def test_no_import_of_another_packages_private_module():
+    """Issue 45: a subpackage uses another one through its public names only."""
+    bad = {
+        str(path.relative_to(PACKAGE)): found
+        for path in PACKAGE.rglob("*.py")
+        if (found := _private_imports(path))
+    }
+    assert not bad, bad
+
+
 def test_importing_visjax_loads_neither_opencv_nor_cvxpy():
     code = (
         "import sys, visjax; "

@@ -372,8 +372,7 @@ def main(argv=None) -> int:
     apply_xla_cpu_workarounds()  # the command line's own choice; `import visjax` sets nothing
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .io import DataFormatError, staged_output
-    from .io._staging import OutputConflictError
+    from .io import DataFormatError, OutputConflictError, staged_output
     from .report import RunFailed
     from .studies import UserCodeError
 

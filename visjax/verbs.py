@@ -155,8 +155,7 @@ def _too_many(command, total, what) -> None:
 def _check_grid(name, problem, spec) -> dict:
     """The grid's points, its parameter names among the problem's (the closest suggested)
     and its values valid for them (finite; positive where the parameter must be)."""
-    from .studies import parse_grid
-    from .studies._problem import check_values
+    from .studies import check_values, parse_grid
 
     if not spec:
         raise Refused(f"{problem.title} has no default grid: give --grid")
@@ -306,7 +305,7 @@ def run_command(
 
     from ._results import result_names
     from .report import RunFailed
-    from .studies import as_json, innovation_line, quality, quality_line, solution
+    from .studies import as_json, innovation_line, quality, quality_line, solution, solution_table
 
     results, failures = {}, []
     dropped = _dropped(problem, data)
@@ -365,7 +364,7 @@ def run_command(
             from .plots import save_figure
 
             folder.mkdir(parents=True, exist_ok=True)
-            pd.DataFrame(_trajectory(sol)).to_parquet(folder / "estimates.parquet", index=False)
+            pd.DataFrame(solution_table(sol)).to_parquet(folder / "estimates.parquet", index=False)
             save_figure(p.figure(m, sol), folder / "run.png", formats)
         results[tag] = command_summary(
             "run", body, settings=settings, seed=seed, started=started, out=folder
@@ -417,7 +416,7 @@ def _dropped(problem, data) -> dict | None:
     if data is None:
         return None
     from .io import MAX_DROPPED_FRACTION
-    from .papers._files import DROPPED_RESULT, coverage_line, file_coverage
+    from .papers import DROPPED_RESULT, coverage_line, file_coverage
     from .studies import registered
 
     cover = file_coverage(registered(problem).name, data)
@@ -437,23 +436,6 @@ def _say_dropped(body: dict, dropped, head: str) -> None:
     if dropped is not None:
         body["dropped_fraction"] = dropped["fraction"]
         print(f"{head}{dropped['line']}")
-
-
-def _trajectory(sol) -> dict:
-    """The saved outputs of a solution as table columns: `t`, then each output field's
-    components (`name[i]`, `name[i,j]`)."""
-    from .studies._sweep import _columns
-
-    table = {"t": np.asarray(sol.ts)}
-    outputs = sol.outputs
-    items = outputs.items() if isinstance(outputs, dict) else vars(outputs).items()
-    for name, v in items:
-        if v is None or np.ndim(v) < 1:
-            continue
-        v = np.asarray(v)
-        if v.shape[0] == table["t"].shape[0]:
-            table.update(_columns(name, v))
-    return table
 
 
 def compare_command(
@@ -654,7 +636,7 @@ def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0, **durab
             **durable,
         )
     except ValueError as e:  # the sweep's own memory check (XLA's analysis of a chunk)
-        from .studies._sweep import MemoryLimitError
+        from .studies import MemoryLimitError
 
         if durable.get("max_memory") is not None and isinstance(e, MemoryLimitError):
             raise Refused(str(e)) from None
@@ -692,8 +674,7 @@ def _job_slice(shard):
 def _parts_folder(folder: Path, job) -> Path:
     """Where a sweep's parts go: beside its other outputs, in the folder the user asked
     for (never the staging one: an interrupted sweep keeps them)."""
-    from .io import user_path
-    from .io._staging import written_directly
+    from .io import user_path, written_directly
 
     final = Path(user_path(str(folder)))
     parts = final / ("parts" if job is None else f"parts-{job[0]}-of-{job[1]}")
@@ -707,7 +688,7 @@ def _refuse_finished(folder: Path, parts: Path, resume: bool, force: bool) -> No
     import json
 
     from .io import user_path
-    from .studies._parts import clear_parts
+    from .studies import clear_parts
 
     final = Path(user_path(str(folder)))
     summary = final / "summary.json"
@@ -765,7 +746,7 @@ def _interruptible():
 
 
 def _saved_runs(parts: Path) -> tuple[int, int]:
-    from .studies._parts import read_manifest
+    from .studies import read_manifest
 
     try:
         m = read_manifest(parts)
@@ -955,7 +936,7 @@ def merge_command(paths, out=None, quiet: bool = False) -> dict:
     started = time.perf_counter()
     settings = _settings(locals())
     from . import studies
-    from .studies._parts import find_parts, merge_parts, read_manifest
+    from .studies import find_parts, merge_parts, read_manifest
 
     folders = find_parts(paths)
     groups: dict[str, list] = {}

@@ -17,9 +17,9 @@ from visjax.baselines import (
     cauchy,
     frame_poses,
     half_width_for_bandwidth,
+    velocity_covariance,
     velocity_smoother,
 )
-from visjax.baselines._pose_fit import _velocity_covariance
 from visjax.estimators import FixedCamera
 from visjax.papers import chitrakaran as ch
 from visjax.sim import CameraRig, constant_twist_trajectory, object_points, points_in_camera, view
@@ -74,11 +74,18 @@ def test_predicted_spread_matches_the_monte_carlo(scene):
         # the velocity problem's fit: components from fits of different widths
         slow = velocity_smoother(TS, noisy, camera, poses=poses, **dict(FIT, bandwidth_hz=4.0))
         widths = (M,) * 3 + (M_SLOW,) * 3
-        return sols + (slow.diagnostics.cov, _velocity_covariance(poses, TS, widths, 2, False))
+        return sols + (slow.diagnostics.cov, velocity_covariance(poses, TS, widths))
 
     M = half_width_for_bandwidth(BANDWIDTH_HZ, 1.0 / RATE_HZ)
     M_SLOW = half_width_for_bandwidth(4.0, 1.0 / RATE_HZ)
     assert M < M_SLOW
+    # `velocity_covariance` differentiable in the pixels (through the frames' poses)
+    grad = jax.grad(
+        lambda p: jnp.sum(velocity_covariance(frame_poses(p, camera), TS, (M,) * 6)[20])
+    )(pixels)
+    assert np.all(np.isfinite(grad)) and np.any(grad != 0)
+    with pytest.raises(ValueError, match="six positive ints"):
+        velocity_covariance(frame_poses(pixels, camera), TS, (M,) * 5)
     centred, causal, slow, mixed = eqx.filter_jit(jax.vmap(fits))(keys)
     np.testing.assert_allclose(mixed[:, :, :3, :3], centred.diagnostics.cov[:, :, :3, :3])
     np.testing.assert_allclose(mixed[:, :, 3:, 3:], slow[:, :, 3:, 3:], rtol=1e-12)

@@ -39,6 +39,7 @@ from ._pose_fit import (
     half_width_for_bandwidth as half_width_for_bandwidth,
     object_features as object_features,
     reprojection_residuals as reprojection_residuals,
+    velocity_covariance as velocity_covariance,
     velocity_ekf as velocity_ekf,
     velocity_smoother as velocity_smoother,
 )

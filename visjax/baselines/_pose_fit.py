@@ -307,6 +307,36 @@ def _velocity_outputs(poses, ts, half_width, degree, causal):
     return jax.vmap(at)(jnp.arange(ts.shape[0]), idx, use, c)
 
 
+def velocity_covariance(
+    poses: FramePoses,
+    ts: Float[ArrayLike, " N"],
+    half_widths: tuple[int, ...],
+    *,
+    degree: int = 2,
+    causal: bool = False,
+) -> Float[Array, "N 6 6"]:
+    """The covariance (N, 6, 6) of the velocity $[v_e, \\omega_e]$ that `velocity_smoother`
+    fits to the frames' poses (`frame_poses`), component $i$ from a local polynomial fit of
+    degree `degree` and half-width `half_widths[i]` samples (six of them; one width for
+    all six is `velocity_smoother`'s own covariance, `SmootherDiagnostics.cov`; the
+    velocity problem gives each degree of freedom its own bandwidth). First order in each
+    frame's pose covariance (`FramePoses.cov`), frames independent; NaN where a window
+    holds a failed frame. Pure JAX (`jit`, `vmap`, `grad`; `half_widths`, `degree` and
+    `causal` static).
+
+    **Raises:** `ValueError` for `half_widths` that are not six positive ints."""
+    half_widths = tuple(half_widths)
+    if len(half_widths) != 6 or not all(
+        isinstance(m, int | np.integer) and m >= 1 for m in half_widths
+    ):
+        raise ValueError(f"`half_widths` must be six positive ints; got {half_widths!r}.")
+    if not isinstance(degree, int) or degree < 1:
+        raise ValueError(f"`degree` must be a positive int; got {degree!r}.")
+    return _velocity_covariance(
+        poses, as_float(ts), tuple(int(m) for m in half_widths), degree, bool(causal)
+    )
+
+
 def _velocity_covariance(poses, ts, half_widths, degree, causal):
     """The covariance (N, 6, 6) of the fitted velocity $[v_e, \\omega_e]$, component $i$ from
     the fit of half-width `half_widths[i]` (one per component; all equal for one fit).

@@ -36,10 +36,12 @@ from ._outputs import (
     write_summary as write_summary,
 )
 from ._staging import (
+    OutputConflictError as OutputConflictError,
     check_output_path as check_output_path,
     output_name as output_name,
     staged_output as staged_output,
     user_path as user_path,
+    written_directly as written_directly,
 )
 from ._writing import (
     Outputs as Outputs,

@@ -33,7 +33,10 @@ from . import (
     spica as spica,
 )
 from ._files import (
+    DROPPED_RESULT as DROPPED_RESULT,
     FileEstimate as FileEstimate,
+    coverage_line as coverage_line,
+    file_coverage as file_coverage,
     moving_point_file_reproduction as moving_point_file_reproduction,
     moving_point_from_file as moving_point_from_file,
     static_points_file_reproduction as static_points_file_reproduction,

@@ -196,9 +196,9 @@ class VelocityProblem(AbstractProblem):
             cauchy,
             frame_poses,
             half_width_for_bandwidth,
+            velocity_covariance,
             velocity_smoother,
         )
-        from ..baselines._pose_fit import _velocity_covariance
 
         camera = self._camera(pixels)
         poses = frame_poses(pixels, camera, loss=cauchy(ROBUST_SCALE_PX) if self.robust else None)
@@ -227,7 +227,7 @@ class VelocityProblem(AbstractProblem):
         widths = tuple(
             half_width_for_bandwidth(bw, interval, causal=causal) for bw in self.bandwidths
         )
-        cov = _velocity_covariance(poses, self.ts, widths, 2, causal)
+        cov = velocity_covariance(poses, self.ts, widths, causal=causal)
         result, failed = RESULTS.successful, jnp.array(-1)
         for sol in sols.values():  # the first failure of any of the fits
             result, failed = first_failure(result, failed, sol.result, sol.failed_sample)

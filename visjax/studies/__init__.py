@@ -11,8 +11,10 @@ from ._compare import StudyTooLong as StudyTooLong, compare as compare
 from ._executors import RayExecutor as RayExecutor
 from ._parts import (
     PartsError as PartsError,
+    clear_parts as clear_parts,
     find_parts as find_parts,
     merge_parts as merge_parts,
+    read_manifest as read_manifest,
 )
 from ._problem import (
     INNOVATION_GATE as INNOVATION_GATE,
@@ -22,6 +24,7 @@ from ._problem import (
     Parameter as Parameter,
     as_default as as_default,
     as_json as as_json,
+    check_values as check_values,
     evaluate as evaluate,
     fingerprint as fingerprint,
     held as held,
@@ -41,12 +44,14 @@ from ._registry import (
     registered as registered,
 )
 from ._sweep import (
+    MemoryLimitError as MemoryLimitError,
     best as best,
     grid as grid,
     log_axis as log_axis,
     parse_grid as parse_grid,
     random_points as random_points,
     save_table as save_table,
+    solution_table as solution_table,
     summarise as summarise,
     sweep as sweep,
 )

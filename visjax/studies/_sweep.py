@@ -109,6 +109,22 @@ def _columns(name: str, values: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
+def solution_table(solution) -> dict[str, np.ndarray]:
+    """The saved outputs of one solution (`studies.solution`) as table columns: `t`, then
+    each output field's components (`name[i]`, `name[i,j]`), for a pandas `DataFrame`.
+    Fields not saved at every time are left out."""
+    table = {"t": np.asarray(solution.ts)}
+    outputs = solution.outputs
+    items = outputs.items() if isinstance(outputs, dict) else vars(outputs).items()
+    for name, v in items:
+        if v is None or np.ndim(v) < 1:
+            continue
+        v = np.asarray(v)
+        if v.shape[0] == table["t"].shape[0]:
+            table.update(_columns(name, v))
+    return table
+
+
 def _key_data(keys) -> np.ndarray:
     """Seeds (ints) or typed PRNG keys -> their raw key data, one row per seed."""
     keys = jnp.asarray(keys) if not isinstance(keys, jax.Array) else keys
