@@ -130,17 +130,11 @@ class VelocityProblem(AbstractProblem):
         return WindowRMS(t0 + a, t0 + b + 1e-9, field="v_hat")
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ..estimators import SaveAt, VelocityEstimator, run, velocity_stream
+        from ..estimators import SaveAt, run
 
         pixels = inputs["pixels"]
         if method == "estimator":
-            stream = velocity_stream(
-                self.ts, pixels, self._camera(pixels), dropped=self._dropped(), truth=self.truth,
-                throw=False, chunk=self.chunk,
-            )  # fmt: skip
-            est = VelocityEstimator(
-                K=params["K"] * params["K_scale"], rho=params["rho"] * params["rho_scale"]
-            )
+            stream, est = self._estimator(params, pixels)
             reducer = None if self.truth is None else self._window()
             return run(
                 est,
@@ -166,6 +160,20 @@ class VelocityProblem(AbstractProblem):
                 throw=False,
             )
         raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
+
+    def _estimator(self, params, pixels):
+        """The estimator's stream of one draw's `pixels` and the estimator at `params`
+        (resolved), as `solve` runs them."""
+        from ..estimators import VelocityEstimator, velocity_stream
+
+        stream = velocity_stream(
+            self.ts, pixels, self._camera(pixels), dropped=self._dropped(), truth=self.truth,
+            throw=False, chunk=self.chunk,
+        )  # fmt: skip
+        est = VelocityEstimator(
+            K=params["K"] * params["K_scale"], rho=params["rho"] * params["rho_scale"]
+        )
+        return stream, est
 
     def _dropped(self):
         return "hold" if self.dropouts else "stop"
@@ -271,19 +279,11 @@ class VelocityProblem(AbstractProblem):
         """The estimator's output error $\\tilde e$ against the noise its measurements imply
         (`estimators.velocity_innovation`) over the scoring window; `None` for the
         baselines (not observers of $e$) and a solution saved without its time series."""
-        from ..estimators import VelocityEstimator, velocity_innovation, velocity_stream
+        from ..estimators import velocity_innovation
 
         if method != "estimator" or getattr(solution, "diagnostics", None) is None:
             return None
-        pixels = inputs["pixels"]
-        stream = velocity_stream(
-            self.ts, pixels, self._camera(pixels), dropped=self._dropped(), throw=False,
-            chunk=self.chunk,
-        )  # fmt: skip
-        params = self.resolve(params)
-        est = VelocityEstimator(
-            K=params["K"] * params["K_scale"], rho=params["rho"] * params["rho_scale"]
-        )
+        stream, est = self._estimator(self.resolve(params), inputs["pixels"])
         t0 = self.ts[0]
         a, b = self.window
         return velocity_innovation(stream, solution, est, t_start=t0 + a, t_end=t0 + b + 1e-9)
