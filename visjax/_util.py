@@ -122,3 +122,51 @@ def covariance(residuals, y, args, count) -> tuple:
     inv = jnp.linalg.inv(JTJ / jnp.outer(d, d)) / jnp.outer(d, d)
     cov = sigma2 * 0.5 * (inv + inv.T)
     return cov, sigma2
+
+
+class Frozen:
+    """A NumPy array held as a static value (hashed by its bytes, equal by its values): a
+    setting that fixes a compiled program's structure, such as the sample times a held
+    integration step maps onto its steps. Two problems whose frozen values are equal share
+    their compiled programs; `.array` is the (read-only) array."""
+
+    __slots__ = ("array", "_hash")
+
+    def __init__(self, array):
+        a = np.array(array, copy=True)
+        a.flags.writeable = False
+        self.array = a
+        self._hash = hash((a.dtype.str, a.shape, a.tobytes()))
+
+    def __hash__(self):
+        return self._hash
+
+    def __eq__(self, other):
+        return (
+            isinstance(other, Frozen)
+            and self._hash == other._hash
+            and self.array.dtype == other.array.dtype
+            and self.array.shape == other.array.shape
+            and bool(np.array_equal(self.array, other.array, equal_nan=True))
+        )
+
+    def __repr__(self):
+        return f"Frozen(shape={self.array.shape}, dtype={self.array.dtype})"
+
+
+class Note(str):
+    """Descriptive text held in a static field that does not key compilation (a problem's
+    `source`, the name of its data file): two Notes compare equal whatever their text, so
+    problems that differ only in their notes share compiled programs; against a plain
+    `str` a Note compares as its text."""
+
+    __slots__ = ()
+
+    def __eq__(self, other):
+        return True if isinstance(other, Note) else str.__eq__(self, other)
+
+    def __ne__(self, other):
+        return not self.__eq__(other)
+
+    def __hash__(self):
+        return 0

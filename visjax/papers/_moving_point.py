@@ -8,6 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._util import Note
 from ..estimators import AbstractAdjoint, DirectAdjoint
 from ..studies import AbstractProblem, Parameter, as_default, held
 
@@ -50,7 +51,9 @@ class MovingPointProblem(AbstractProblem):
     moving: bool = eqx.field(static=True)
     window_s: tuple = eqx.field(static=True)
     window_frames: int = eqx.field(static=True)
-    source: str = eqx.field(static=True)
+    source: str = eqx.field(static=True)  # a `Note`: it does not key compilation
+    frame_interval: float = eqx.field(static=True, default=1 / 30)  # median, s
+    save_every: int = eqx.field(static=True, default=1)  # the observer's, about 100 Hz
     set_name: str | None = eqx.field(static=True, default=None)
     adjoint: AbstractAdjoint = DirectAdjoint()
 
@@ -116,12 +119,10 @@ class MovingPointProblem(AbstractProblem):
                 ),
             )
             reducer = None if truth is None else self._window()
-            step = float(np.diff(np.asarray(self.ts)[:2])[0])
-            every = max(1, int(round(0.01 / step)))
             return run(
                 obs,
                 stream,
-                saveat=SaveAt(every=every, outputs=outputs),
+                saveat=SaveAt(every=self.save_every, outputs=outputs),
                 reducer=reducer,
                 adjoint=self.adjoint,
                 throw=False,
@@ -131,11 +132,11 @@ class MovingPointProblem(AbstractProblem):
             window = self.frame_ts.shape[0] if method == "batch" else self.window_frames
             return triangulate_point(self._frames(pixels), window=window, order=order, throw=False)
         if method == "ekf":
-            interval = float(np.median(np.diff(np.asarray(self.frame_ts))))
-            depth0 = 1.0 / float(np.asarray(self.observer.x3_guess))
+            interval = self.frame_interval
+            depth0 = 1.0 / jnp.asarray(self.observer.x3_guess)
             return moving_point_ekf(
                 self._frames(pixels),
-                r_norm=max(self.noise_px, 0.05) / float(np.asarray(self.Kc)[0, 0]),
+                r_norm=jnp.maximum(self.noise_px, 0.05) / self.Kc[0, 0],
                 depth0=depth0,
                 sigma_depth0=0.5 * depth0,
                 q_velocity=interval if self.moving else 0.0,
@@ -340,7 +341,9 @@ def moving_point_problem(
             moving=True,
             window_s=(t0 + (t1 - t0) / 2, t1 + 1.0),
             window_frames=max(2, int(round(window_s / interval))),
-            source=str(data),
+            source=Note(str(data)),
+            frame_interval=interval,
+            save_every=_save_every(ts),
             adjoint=DirectAdjoint() if adjoint is None else adjoint,
         )
     set_name = "I.1" if variant is None else variant
@@ -365,10 +368,18 @@ def moving_point_problem(
         moving=jang.SETS[set_name].moving,
         window_s=(duration / 2, duration + 1.0),
         window_frames=max(2, int(round(window_s / interval))),
-        source=f"thesis set {set_name} (simulated), {duration:g} s",
+        source=Note(f"thesis set {set_name} (simulated), {duration:g} s"),
+        frame_interval=interval,
+        save_every=_save_every(sc.ts),
         set_name=set_name,
         adjoint=DirectAdjoint() if adjoint is None else adjoint,
     )
+
+
+def _save_every(ts) -> int:
+    """The observer's saving period in steps: about 100 Hz."""
+    step = float(np.diff(np.asarray(ts)[:2])[0])
+    return max(1, int(round(0.01 / step)))
 
 
 def moving_point_observer_for_data(data):

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._util import Frozen, Note
 from ..estimators import AbstractAdjoint, DirectAdjoint
 from ..studies import AbstractProblem, Parameter
 
@@ -85,7 +86,9 @@ class StaticPointsProblem(AbstractProblem):
     dt: float | None = eqx.field(static=True)
     window_frames: int = eqx.field(static=True)
     every_frames: int = eqx.field(static=True)
-    source: str = eqx.field(static=True)
+    source: str = eqx.field(static=True)  # a `Note`: it does not key compilation
+    save_every: int = eqx.field(static=True, default=1)
+    times: Frozen | None = eqx.field(static=True, default=None)  # `ts`, with a held step
     adjoint: AbstractAdjoint = DirectAdjoint()
     robust: bool = eqx.field(default=False, static=True)
 
@@ -114,12 +117,22 @@ class StaticPointsProblem(AbstractProblem):
 
         return {"pixels": add_pixel_noise(key, self.clean, self.noise_px)}
 
+    def _ts(self):
+        # with a held step the runner maps the sample times onto its steps: concrete
+        return self.ts if self.times is None else self.times.array
+
     def _estimator(self, pixels):
         from ..estimators import StaticPointsEstimator, static_points_stream
 
         k = self.n_known
         stream = static_points_stream(
-            self.ts, self.R_b, self.x_b, pixels[:, k:], pixels[:, :k], self.omega_c, throw=False
+            self._ts(),
+            self.R_b,
+            self.x_b,
+            pixels[:, k:],
+            pixels[:, :k],
+            self.omega_c,
+            throw=False,
         )
         est = StaticPointsEstimator.from_nominal(
             stream, self.A_nominal, self.R_c_nominal, self.x_c_nominal, dt=self.dt
@@ -138,14 +151,11 @@ class StaticPointsProblem(AbstractProblem):
                 est,
                 (a * est.alpha_c, a * est.alpha, g * est.eta0, g * est.eta1, g * est.gamma_s0),
             )
-            # saved at the sample rate, at most 100 Hz
-            interval = max(float(np.max(np.diff(np.asarray(self.ts)))), 0.01)
-            every = max(1, int(round(interval / (self.dt or interval))))
             sol = run(
                 est,
                 stream,
                 dt=self.dt,
-                saveat=SaveAt(every=every, outputs=outputs, diagnostics=outputs),
+                saveat=SaveAt(every=self.save_every, outputs=outputs, diagnostics=outputs),
                 adjoint=self.adjoint,
                 throw=False,
             )
@@ -305,6 +315,7 @@ def static_points_problem(
     # 1 kHz on held samples; `from_nominal` derives its gains for that step (no bound here)
     dt = integration_step(Stream(ts=ts, ys=ts), max_step=1e-3)
     A_n, R_n, x_n = (jnp.asarray(x, float) for x in nominal)
+    saved = max(interval, 0.01)  # the estimator's saving interval, s
     return StaticPointsProblem(
         ts=ts,
         R_b=R_b,
@@ -320,7 +331,9 @@ def static_points_problem(
         dt=None if dt is None else float(dt),
         window_frames=max(2, int(round(window_s / interval))),
         every_frames=max(1, int(round(every_s / interval))),
-        source=source,
+        source=Note(source),
+        save_every=max(1, int(round(saved / (dt or saved)))),  # at most 100 Hz
+        times=None if dt is None else Frozen(np.asarray(ts)),
         adjoint=DirectAdjoint() if adjoint is None else adjoint,
         robust=bool(robust),
     )

@@ -5,9 +5,11 @@ fixed camera*), with the paper's estimator and its baselines."""
 from typing import Any
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._util import Note
 from ..estimators import AbstractAdjoint, DirectAdjoint
 from ..studies import AbstractProblem, Parameter, as_default, held
 
@@ -80,21 +82,22 @@ class VelocityProblem(AbstractProblem):
     n_star: Any
     z1_star: Any
     reference_pixels: Any
-    noise_px: float = eqx.field(static=True)
+    noise_px: Any  # a data parameter (`at`): a sweep over noise levels is one `vmap`
     window: tuple = eqx.field(static=True)
     bandwidths: tuple = eqx.field(static=True)
     max_jerk: float = eqx.field(static=True)
     dropouts: bool = eqx.field(static=True)
     chunk: int = eqx.field(static=True)
-    source: str = eqx.field(static=True)
-    known_length: tuple | None = eqx.field(static=True, default=None)
+    source: str = eqx.field(static=True)  # a `Note`: it does not key compilation
+    interval: float = eqx.field(static=True, default=1e-3)  # the median sample interval, s
+    known_length: tuple | None = None  # (i, j) Python ints, the length an array (traced)
     constants: str = eqx.field(static=True, default="calibration")
     adjoint: AbstractAdjoint = DirectAdjoint()
     robust: bool = eqx.field(default=False, static=True)
 
     @property
     def title(self) -> str:
-        return f"velocity (Chitrakaran et al.), {self.source}, {self.noise_px:g} px noise" + (
+        return f"velocity (Chitrakaran et al.), {self.source}, {_noise(self.noise_px)} noise" + (
             ", robust baselines" if self.robust else ""
         )
 
@@ -108,6 +111,13 @@ class VelocityProblem(AbstractProblem):
             "rho": Parameter(as_default(self.rho), "", True, "gain rho of eq. (40), diagonal"),
             "K_scale": Parameter(1.0, "", True, "multiplier of K"),
             "rho_scale": Parameter(1.0, "", True, "multiplier of rho"),
+            "noise_px": Parameter(
+                float(self.noise_px),
+                "px",
+                False,
+                "standard deviation of the Gaussian pixel noise of each draw",
+                nonnegative=True,
+            ),
         }
 
     def gains(self, params) -> dict:
@@ -153,7 +163,7 @@ class VelocityProblem(AbstractProblem):
                 self.ts,
                 pixels,
                 self._camera(pixels),
-                r_px=max(self.noise_px, 0.05),
+                r_px=jnp.maximum(self.noise_px, 0.05),
                 max_jerk=self.max_jerk,
                 max_angular_jerk=self.max_jerk,
                 gate=ROBUST_GATE if self.robust else None,
@@ -210,7 +220,7 @@ class VelocityProblem(AbstractProblem):
 
         camera = self._camera(pixels)
         poses = frame_poses(pixels, camera, loss=cauchy(ROBUST_SCALE_PX) if self.robust else None)
-        interval = float(np.median(np.diff(np.asarray(self.ts))))
+        interval = self.interval
         sols = {
             bw: velocity_smoother(
                 self.ts,
@@ -311,14 +321,14 @@ class VelocityProblem(AbstractProblem):
     def settings(self) -> dict:
         return {
             "source": self.source,
-            "noise_px": self.noise_px,
+            "noise_px": float(self.noise_px),
             "K_reference": np.asarray(self.K).tolist(),
             "rho_reference": np.asarray(self.rho).tolist(),
             "window_s": list(self.window),
             "estimator_bandwidth_hz": list(self.bandwidths),
             "fit_bandwidth_hz": list(self.bandwidths),
             "fit_degree": 2,
-            "ekf_r_px": max(self.noise_px, 0.05),
+            "ekf_r_px": max(float(self.noise_px), 0.05),
             "ekf_max_jerk": self.max_jerk,
             "robust": (
                 f"fits: per-frame poses by the Cauchy loss, scale {ROBUST_SCALE_PX:g} px; "
@@ -333,7 +343,9 @@ class VelocityProblem(AbstractProblem):
                 if self.constants == "per_draw"
                 else "the noise-free pixels (calibration), shared by all methods"
             ),
-            "known_length": None if self.known_length is None else list(self.known_length),
+            "known_length": None
+            if self.known_length is None
+            else [*self.known_length[:2], float(self.known_length[2])],
             "per_run": "pixel noise; homography, decomposition and J recomputed",
             "latency": "batch: one fit over all frames per call; others: per sample",
             "chunk": self.chunk,
@@ -441,13 +453,14 @@ def velocity_problem(
         n_star=n_star,
         z1_star=z1_star,
         reference_pixels=p_ref,
-        noise_px=float(noise_px),
+        noise_px=jnp.asarray(float(noise_px)),
         window=window(float(ts[-1]) - float(ts[0])),
         bandwidths=tuple(velocity_observer_bandwidth_hz(K)),
         max_jerk=jerk,
         dropouts=dropouts,
         chunk=chunk,
-        source=source,
+        source=Note(source),
+        interval=float(np.median(np.diff(np.asarray(ts)))),
         known_length=None if known_length is None else _length(known_length),
         constants=constants,
         adjoint=DirectAdjoint() if adjoint is None else adjoint,
@@ -455,6 +468,13 @@ def velocity_problem(
     )
 
 
-def _length(known_length) -> tuple[int, int, float]:
+def _noise(noise_px) -> str:
+    try:
+        return f"{float(noise_px):g} px"
+    except (TypeError, jax.errors.ConcretizationTypeError):  # traced (a noise sweep)
+        return "swept px"
+
+
+def _length(known_length) -> tuple:
     i, j, length = known_length
-    return (int(i), int(j), float(length))
+    return (int(i), int(j), jnp.asarray(float(length), dtype=float))

@@ -34,14 +34,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
-from ..estimators import (
-    SaveAt,
-    VelocityEstimator,
-    WindowRMS,
-    fixed_camera,
-    run,
-    velocity_stream,
-)
 from ..io import Outputs
 from ..sim import (
     CameraRig,
@@ -244,30 +236,25 @@ def noise_study(
     K=K_EQ63,
     rho=RHO_EQ63,
 ) -> dict:
-    """RMS velocity error over the window, per noise level, vmapped over `seeds` noise draws.
+    """RMS velocity error over the window per noise level: one `studies.sweep` of the
+    `velocity` problem over its `noise_px` parameter (one compiled program for every level
+    and seed), seeds `0 ... seeds - 1` (the same draws at every level, scaled).
 
     The plane normal and $z_1^*$ are measured once from the noise-free scenario (they are
     constants of the set-up); the pixel noise enters every frame of the estimator's input.
 
-    **Returns:** `{noise: array (seeds, 6)}` of RMS errors.
+    **Returns:** `{noise: array (seeds, 6)}` of RMS errors (NaN for a failed run).
     """
-    sc = section6_scenario(duration, rate_hz)
-    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
-    n_star, z1_star = camera.n_star, camera.z1_star
-    a, b = window(duration)
-    red = WindowRMS(a, b, field="v_hat")
-    est = VelocityEstimator(K=K, rho=rho)
+    from ..studies import sweep
+    from ._velocity import velocity_problem
 
-    @jax.jit
-    def rms(key, sigma):
-        pixels = sc.pixels + sigma * jax.random.normal(key, sc.pixels.shape)
-        camera = fixed_camera(pixels, sc.A, sc.R_star, sc.s[0], n_star=n_star, z1_star=z1_star)
-        stream = velocity_stream(sc.ts, pixels, camera, truth=sc.velocity)
-        return run(est, stream, saveat=SaveAt(outputs=False), reducer=red).summary.rms
-
-    keys = jax.random.split(jax.random.key(0), seeds)
-    batched = jax.vmap(rms, in_axes=(0, None))
-    return {float(s): np.asarray(batched(keys, jnp.asarray(s, float))) for s in noise_levels}
+    problem = velocity_problem(duration=duration, rate_hz=rate_hz)
+    levels = np.asarray(noise_levels, float)
+    table = sweep(problem, {"noise_px": levels}, np.arange(seeds), fixed={"K": K, "rho": rho})
+    columns = [f"rms[{i}]" for i in range(6)]
+    return {
+        float(s): table.loc[table["point"] == i, columns].to_numpy() for i, s in enumerate(levels)
+    }
 
 
 # Section 3 against OpenCV: the errors of a reconstruction against ground truth.

@@ -69,7 +69,7 @@ def compare(
     from ._problem import AbstractProblem, as_json, method_runs
 
     if isinstance(methods, AbstractProblem):
-        problem = methods
+        problem = methods.at(methods.resolve(params))  # its data parameters set
         if inputs is not None or score is not None or updates is not None:
             raise ValueError("with a problem, `compare` takes no `inputs`, `score` or `updates`.")
 

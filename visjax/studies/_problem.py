@@ -9,6 +9,7 @@ methods take (`parameters`: defaults, units, positivity) and how a solution is s
 """
 
 import abc
+import dataclasses
 import hashlib
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
@@ -27,14 +28,16 @@ class Parameter(eqx.Module):
     **Fields:** `default` (a float, or nested tuples of floats for an array parameter: the
     published value where there is one); `units`; `positive` (the value must stay above 0:
     `tune` then optimises its logarithm); `doc` (one line: what it is, where it comes
-    from). A scalar given for an array parameter is broadcast to its shape (one value for
-    every component).
+    from); `nonnegative` (the value must not be below 0, e.g. a noise level). A scalar
+    given for an array parameter is broadcast to its shape (one value for every
+    component).
     """
 
     default: Any = eqx.field(static=True)
     units: str = eqx.field(static=True, default="")
     positive: bool = eqx.field(static=True, default=True)
     doc: str = eqx.field(static=True, default="")
+    nonnegative: bool = eqx.field(static=True, default=False)
 
     @property
     def value(self) -> np.ndarray:
@@ -213,6 +216,22 @@ class AbstractProblem(eqx.Module):
                 out[name] = jnp.asarray(value)
         return out
 
+    def at(self, params: Mapping[str, Any]) -> "AbstractProblem":
+        """The problem with its data parameters set from `params`: a parameter whose name is
+        also a (non-static) field of the problem, such as a noise level `noise_px`, replaces
+        that field, so `inputs` reads it from `self` and a sweep over it is one `vmap`.
+        Every study calls it before `inputs` and `solve` (traceable)."""
+        names = [
+            f.name
+            for f in dataclasses.fields(self)
+            if f.name in params and not f.metadata.get("static", False)
+        ]
+        if not names:
+            return self
+        return eqx.tree_at(
+            lambda p: [getattr(p, n) for n in names], self, [params[n] for n in names]
+        )
+
     def check_method(self, method: str | None) -> str:
         """The method's name (`None`: the estimator, the first); `ValueError` if unknown."""
         if method is None:
@@ -248,6 +267,8 @@ def check_values(problem: AbstractProblem, params: Mapping[str, Any], where: str
             raise ValueError(f"{where}: parameter {name!r} has non-finite values: {v}.")
         if specs[name].positive and np.any(v <= 0):
             raise ValueError(f"{where}: parameter {name!r} must be positive; got {v}.")
+        if specs[name].nonnegative and np.any(v < 0):
+            raise ValueError(f"{where}: parameter {name!r} must not be negative; got {v}.")
 
 
 def fingerprint(problem: AbstractProblem) -> str:
@@ -267,56 +288,56 @@ def fingerprint(problem: AbstractProblem) -> str:
     return h.hexdigest()
 
 
-class _Run:
-    """`(point, key) -> solution` and `solution -> metrics` of one method of a problem,
-    hashable by the problem's fingerprint (the sweep's compiled chunk is cached on it)."""
+class _Run(eqx.Module):
+    """`(point, key) -> solution` and `solution -> metrics` of one method of a problem.
 
-    def __init__(self, problem: AbstractProblem, method: str, fixed: Mapping[str, Any]):
-        self.problem, self.method = problem, method
-        self.fixed = {k: np.asarray(v, float) for k, v in fixed.items()}
-        self._key = (
-            fingerprint(problem),
-            method,
-            tuple((k, v.shape, v.tobytes()) for k, v in sorted(self.fixed.items())),
-        )
+    A Module: the problem's arrays (its data, camera, scene) and the fixed parameters are
+    leaves, traced through `filter_jit` and passed as arguments to a sweep's compiled
+    chunk, so a second problem of equal shapes and settings reuses every compiled program,
+    and `jax.grad` reaches the problem's data. Only Python settings (sizes, method names,
+    flags) are static."""
 
-    def __hash__(self):
-        return hash(self._key)
-
-    def __eq__(self, other):
-        return isinstance(other, _Run) and self._key == other._key
+    problem: AbstractProblem
+    method: str = eqx.field(static=True)
+    params: dict  # every parameter: the fixed ones, the rest at their defaults (resolved)
 
     def __call__(self, point, key):
-        params = self.problem.resolve({**self.fixed, **point})
-        inputs = self.problem.inputs(key)
-        return self.problem.solve(self.method, params, inputs)
+        params = dict(self.params)
+        for name, value in point.items():
+            if name not in params:
+                raise ValueError(
+                    f"{self.problem.title}: unknown parameter {name!r}; it takes {sorted(params)}."
+                )
+            given = jnp.asarray(value, dtype=params[name].dtype)
+            params[name] = jnp.broadcast_to(given, params[name].shape)
+        problem = self.problem.at(params)
+        return problem.solve(self.method, params, problem.inputs(key))
+
+    def metrics(self, solution):
+        return self.problem.metrics(self.method, solution)
 
 
-class _Metrics:
-    """The metrics of one method of a problem, hashable like `_Run`."""
-
-    def __init__(self, run: _Run):
-        self.run = run
-
-    def __hash__(self):
-        return hash(("metrics", self.run._key))
-
-    def __eq__(self, other):
-        return isinstance(other, _Metrics) and self.run == other.run
-
-    def __call__(self, solution):
-        return self.run.problem.metrics(self.run.method, solution)
+def run_identity(run: _Run) -> str:
+    """A digest of what a problem's run computes (the problem's fingerprint, the method
+    and the resolved parameters): the parts of two sweeps are interchangeable only when
+    these, their points, seeds and chunk agree."""
+    h = hashlib.sha1(fingerprint(run.problem).encode())
+    h.update(run.method.encode())
+    for name, value in sorted(run.params.items()):
+        a = np.asarray(value)
+        h.update(f"{name}{a.dtype}{a.shape}".encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
 
 
-def runner(problem: AbstractProblem, method: str | None = None, fixed=None):
-    """`(factory, metrics)` of one method of a problem: the pair the functional `sweep`
-    and `tune` take (`factory(point, key) -> solution`, the parameters not in `point`
-    from `fixed`, then the defaults)."""
+def runner(problem: AbstractProblem, method: str | None = None, fixed=None) -> _Run:
+    """The run of one method of a problem (`run(point, key) -> solution`,
+    `run.metrics(solution)`): the parameters not in `point` from `fixed`, then the
+    defaults."""
     method = problem.check_method(method)
     fixed = dict(fixed or {})
     check_values(problem, fixed, "fixed parameters")
-    run = _Run(problem, method, fixed)
-    return run, _Metrics(run)
+    return _Run(problem, method, problem.resolve(fixed))
 
 
 class Evaluation(eqx.Module):
@@ -358,17 +379,15 @@ def evaluate(
             )
         keys = jax.vmap(jax.random.key)(keys)
     params = problem.resolve(params)
-    values, result, failed = _evaluate_keys(_Run(problem, method, {}), params, keys)
+    values, result, failed = _evaluate_keys(_Run(problem, method, params), keys)
     return Evaluation(values, result, failed)
 
 
-@eqx.filter_jit  # compiled once per problem and method (hashed as `solution`'s)
-def _evaluate_keys(run, params, keys):
-    problem, method = run.problem, run.method
-
+@eqx.filter_jit  # compiled once per problem type, shapes and settings (its arrays traced)
+def _evaluate_keys(run, keys):
     def one(key):
-        sol = problem.solve(method, params, problem.inputs(key))
-        values = {n: jnp.asarray(v) for n, v in problem.metrics(method, sol).items()}
+        sol = run({}, key)
+        values = {n: jnp.asarray(v) for n, v in run.metrics(sol).items()}
         result = sol.result
         fresh = (result == RESULTS.successful) & ~all_finite(values)
         result = RESULTS.where(fresh, RESULTS.nonfinite_output, result)
@@ -406,14 +425,13 @@ def solution(
             raise ValueError(f"`key` must be a non-negative int seed or a PRNG key; got {key!r}.")
         key = jax.random.key(int(key))
     params = problem.resolve(params)
-    return _solve_outputs(_Run(problem, method, {}), params, key)
+    return _solve_outputs(_Run(problem, method, params), key)
 
 
-@eqx.filter_jit
-def _solve_outputs(run, params, key):
-    # the problem is a compile-time constant, hashed by its fingerprint (its methods may
-    # read its arrays as numbers)
-    return run.problem.solve(run.method, params, run.problem.inputs(key), outputs=True)
+@eqx.filter_jit  # the problem's arrays and the parameters traced: a new file reuses it
+def _solve_outputs(run, key):
+    problem = run.problem.at(run.params)
+    return problem.solve(run.method, run.params, problem.inputs(key), outputs=True)
 
 
 def method_runs(problem: AbstractProblem, params=None) -> dict:

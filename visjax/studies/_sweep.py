@@ -7,13 +7,13 @@ Helpers build the parameter points: `grid` (the Cartesian product of axes), `log
 and `random_points` (log-uniform samples).
 """
 
-import functools
 import math
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -233,7 +233,7 @@ def sweep(
     not finite is marked `nonfinite_output`. With `shard`, the rows of the shard's runs.
     """
     from ._parts import Parts
-    from ._problem import AbstractProblem, check_values, runner
+    from ._problem import AbstractProblem, check_values, run_identity, runner
 
     identity_source, info = None, {}
     if isinstance(factory, AbstractProblem):
@@ -243,8 +243,8 @@ def sweep(
         if not isinstance(params, Mapping):
             raise ValueError("`params` of a problem's sweep must be a dict name -> values.")
         check_values(factory, params, "sweep")
-        factory, metrics = runner(factory, method, fixed)
-        identity_source = repr(factory._key)
+        factory = runner(factory, method, fixed)
+        identity_source = run_identity(factory)
     elif metrics is None:
         raise ValueError("`sweep(factory, params, keys, metrics=...)`: `metrics` is needed.")
     elif method is not None or fixed is not None:
@@ -499,15 +499,48 @@ def _sharding(mesh):
     return NamedSharding(mesh, PartitionSpec(mesh.axis_names))
 
 
-@functools.lru_cache(maxsize=8)
 def _compiled(factory, metrics, treedef, mesh):
-    """The jitted, vmapped run of one chunk; cached per (factory, metrics, parameter
-    structure, mesh), so that repeated sweeps of one problem compile once per chunk shape."""
+    """The jitted, vmapped run of one chunk, `(point_leaves, key_data) -> out`. A problem's
+    run (a Module) passes its arrays as arguments (traced), so that a rebuilt problem of
+    equal shapes and settings, or a new data file, reuses the compiled chunk; the program
+    is cached per (the run's static part or the factory, metrics, parameter structure,
+    mesh)."""
+    if isinstance(factory, eqx.Module):
+        dynamic, static = eqx.partition(factory, eqx.is_array)
+    else:
+        dynamic, static = None, factory
+    leaves, structure = jax.tree_util.tree_flatten(static)
+    key = (structure, tuple(leaves), metrics, treedef, mesh)
+    if key not in _JITTED:
+        if len(_JITTED) >= 8:  # the oldest goes
+            _JITTED.pop(next(iter(_JITTED)))
+        _JITTED[key] = _jitted(static, metrics, treedef, mesh)
+    return _Chunk(_JITTED[key], dynamic)
 
-    def one(point_leaves, kd):
+
+_JITTED: dict = {}
+
+
+class _Chunk:
+    """A compiled chunk with its run's arrays bound."""
+
+    def __init__(self, jitted, dynamic):
+        self.jitted, self.dynamic = jitted, dynamic
+
+    def __call__(self, point_leaves, kd):
+        return self.jitted(self.dynamic, point_leaves, kd)
+
+    def lower(self, point_leaves, kd):
+        return self.jitted.lower(self.dynamic, point_leaves, kd)
+
+
+def _jitted(static, metrics, treedef, mesh):
+    def one(dynamic, point_leaves, kd):
+        factory = static if dynamic is None else eqx.combine(dynamic, static)
         point = jax.tree_util.tree_unflatten(treedef, point_leaves)
         sol = factory(point, jax.random.wrap_key_data(kd))
-        values = {name: jnp.asarray(v) for name, v in dict(metrics(sol)).items()}
+        found = factory.metrics(sol) if metrics is None else metrics(sol)
+        values = {name: jnp.asarray(v) for name, v in dict(found).items()}
         result = sol.result
         fresh = (result == RESULTS.successful) & ~all_finite(values)
         result = RESULTS.where(fresh, RESULTS.nonfinite_output, result)
@@ -516,16 +549,20 @@ def _compiled(factory, metrics, treedef, mesh):
         failed = jnp.asarray(getattr(sol, "failed_sample", -1), jnp.int32)
         return values, result._value, failed
 
-    batched = jax.vmap(one)
+    batched = jax.vmap(one, in_axes=(None, 0, 0))
     if mesh is None:
         return jax.jit(batched)
     # `shard_map`: every device runs the vmap of its own runs, with no communication (under
     # `jit` with sharding annotations alone, a loop whose predicate is batched may be
-    # reduced across devices at every iteration: a collective per step)
+    # reduced across devices at every iteration: a collective per step); the run's arrays
+    # are replicated
     spec = PartitionSpec(mesh.axis_names)
     return jax.jit(
-        jax.shard_map(batched, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
-    )
+        jax.shard_map(
+            batched, mesh=mesh, in_specs=(PartitionSpec(), spec, spec), out_specs=spec,
+            check_vma=False,
+        )
+    )  # fmt: skip
 
 
 def _gather(tree, sharded: bool):

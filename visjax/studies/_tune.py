@@ -239,10 +239,10 @@ def _problem_loss(problem, method, fixed):
     """`(factory, loss)` of one method of a problem: its headline metric as the loss."""
     from ._problem import runner
 
-    factory, metrics = runner(problem, method, fixed)
+    factory = runner(problem, method, fixed)
 
     def loss(sol):
-        return metrics(sol)[problem.metric]
+        return factory.metrics(sol)[problem.metric]
 
     return factory, loss
 
