@@ -297,6 +297,42 @@ def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch)
 
 
 @pytest.mark.slow
+def test_a_slow_file_gives_one_estimate_by_every_route(tmp_path, capsys):
+    """A velocity file sampled at 50 Hz, slower than eq. (63)'s Euler bound: `visjax
+    velocity --data` and `visjax run velocity --data` integrate it with the same held step
+    (`run`'s `dt="auto"` rule, chosen by the problem at its default gains) and give the
+    same estimate (to rounding); neither reports `unstable_step`."""
+    import dataclasses
+
+    from tests.example_data import velocity_example
+    from visjax import io
+
+    data = velocity_example(duration=1.0, noise_px=0.0, dropout=0.0)
+    fields = {f.name: getattr(data, f.name) for f in dataclasses.fields(data)}
+    for name in ("t", "pixels", "velocity"):
+        fields[name] = np.asarray(fields[name])[::20]  # 50 Hz
+    path = io.VelocityData(**fields).save(tmp_path / "slow.npz")
+    old, new = tmp_path / "velocity", tmp_path / "run"
+    codes = [
+        main(["velocity", "--data", str(path), "--quiet", "--out", str(old)]),
+        main(["run", "velocity", "--data", str(path), "--quiet", "--out", str(new)]),
+    ]
+    capsys.readouterr()
+    assert {_summary(old)["result"], _summary(new)["result"]} <= {
+        "successful",
+        "worse_than_trivial",
+    }, codes
+    step = _summary(old)["integration_step_s"]
+    assert 0 < step < 0.02 / 2  # a held step, half the bound at most
+    assert _summary(new)["problem_settings"]["integration_step_s"] == step
+    a = np.load(old / "estimate.npz")
+    b = pd.read_parquet(new / "estimates.parquet")
+    np.testing.assert_array_equal(b["t"].to_numpy(), a["t"])
+    v_hat = b[[f"v_hat[{i}]" for i in range(6)]].to_numpy()
+    np.testing.assert_allclose(v_hat, a["v_hat"], rtol=0, atol=1e-12)
+
+
+@pytest.mark.slow
 def test_velocity_on_a_data_file(tmp_path, capsys):
     """`visjax velocity --data FILE` on the example scene (not the paper's): the recovered
     z1* and, since the file has the truth, `rms_last_half`; a bad file is one line."""

@@ -506,6 +506,19 @@ def test_integration_step_is_one_rule():
     assert run(fast, stream, dt=dt).result == RESULTS.successful
     with pytest.raises(ValueError, match="Euler stability bound"):
         run(fast, stream)  # the sample times are refused for these gains
+    # `dt="auto"` is that rule; with the gains traced (vmap over gains) the sample times,
+    # and a gain past its bound is the run's result code
+    auto = run(fast, stream, dt="auto")
+    np.testing.assert_array_equal(auto.final_state, run(fast, stream, dt=dt).final_state)
+    assert run(slow, stream, dt="auto").ts.shape == (50,)
+
+    def batched(a):
+        return run(LinearObserver(a=a, b=jnp.array(1.0)), stream, dt="auto", throw=False)
+
+    codes = jax.vmap(batched)(jnp.array([10.0, 1000.0])).result
+    assert result_names(codes) == ["successful", "unstable_step"]
+    with pytest.raises(ValueError, match='"auto"'):
+        run(fast, stream, dt="fast")
     with pytest.raises(ValueError, match="no stable step"):
         integration_step(stream, LinearObserver(a=jnp.array(jnp.inf), b=jnp.array(1.0)))
     with pytest.raises(ValueError, match="max_step"):

@@ -702,6 +702,16 @@ def integration_step(
     return dt
 
 
+def _auto_step(stream: Stream, estimator: AbstractEstimator) -> float | None:
+    """`run`'s `dt="auto"`: `integration_step` where the times and the gains' bounds are
+    concrete, else the sample times."""
+    if _concrete(stream.ts) is None:
+        return None
+    if any(_concrete(b) is None for b, *_ in _first_bounds(estimator, stream)):
+        return None
+    return integration_step(stream, estimator)
+
+
 def _unroll(unroll: int, length: int) -> int:
     """`lax.scan`'s `unroll` for a loop of `length` steps (1 to `length`)."""
     return max(1, min(unroll, length))
@@ -731,7 +741,7 @@ def run(
     estimator: AbstractEstimator,
     stream: Stream,
     *,
-    dt: float | None = None,
+    dt: float | str | None = None,
     solver: diffrax.AbstractSolver = diffrax.Euler(),
     saveat: SaveAt = SaveAt(),
     reducer: AbstractReducer | None = None,
@@ -769,7 +779,14 @@ def run(
     - `estimator`: an `AbstractEstimator`. Its gains are array leaves: a new gain value
         reuses the compiled run, and `jax.vmap` over gains batches it.
     - `stream`: a `Stream` of N samples.
-    - `dt`: the integration step (a Python float), or `None` for the sample times.
+    - `dt`: the integration step (a Python float), `None` for the sample times, or
+        `"auto"`: `integration_step(stream, estimator)` (the stream's own rate where the
+        gains' step bounds allow it, else a held step of half the tightest bound), the one
+        rule visjax uses. It needs the sample times and the gains concrete; where either
+        is traced (a run inside `jit` or `vmap` over gains) it is the sample times, and a
+        gain past its bound is reported by the result code (`unstable_step`). A problem
+        whose data are traced chooses its step once, when it is built, by the same rule
+        at its default gains.
     - `solver`: a diffrax solver with fixed steps (the sign-based laws have
         discontinuous right-hand sides: no step-size controller is used).
     - `saveat`: a `SaveAt`: which signals to save, every how many steps.
@@ -794,6 +811,10 @@ def run(
         raise ValueError(
             f"`estimator` must be a visjax AbstractEstimator; got {type(estimator).__name__}."
         )
+    if isinstance(dt, str):
+        if dt != "auto":
+            raise ValueError(f'`dt` must be a float, None or "auto"; got {dt!r}.')
+        dt = _auto_step(stream, estimator)
     if not isinstance(saveat, SaveAt):
         raise ValueError(f"`saveat` must be a visjax SaveAt; got {type(saveat).__name__}.")
     if reducer is not None and not isinstance(reducer, AbstractReducer):

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._util import Note
+from .._util import Frozen, Note
 from ..estimators import AbstractAdjoint, DirectAdjoint
 from ..studies import AbstractProblem, Parameter, as_default, held
 
@@ -90,6 +90,8 @@ class VelocityProblem(AbstractProblem):
     chunk: int = eqx.field(static=True)
     source: str = eqx.field(static=True)  # a `Note`: it does not key compilation
     interval: float = eqx.field(static=True, default=1e-3)  # the median sample interval, s
+    dt: float | None = eqx.field(static=True, default=None)  # the estimator's step
+    times: Frozen | None = eqx.field(static=True, default=None)  # `ts`, with a held step
     known_length: tuple | None = None  # (i, j) Python ints, the length an array (traced)
     constants: str = eqx.field(static=True, default="calibration")
     adjoint: AbstractAdjoint = DirectAdjoint()
@@ -146,10 +148,13 @@ class VelocityProblem(AbstractProblem):
         if method == "estimator":
             stream, est = self._estimator(params, pixels)
             reducer = None if self.truth is None else self._window()
+            # a held step saves about once per sample interval (not every step)
+            every = 1 if self.dt is None else max(1, round(self.interval / self.dt))
             return run(
                 est,
                 stream,
-                saveat=SaveAt(outputs=outputs, diagnostics=outputs),
+                dt=self.dt,
+                saveat=SaveAt(every=every, outputs=outputs, diagnostics=outputs),
                 reducer=reducer,
                 adjoint=self.adjoint,
                 throw=False,
@@ -176,8 +181,9 @@ class VelocityProblem(AbstractProblem):
         (resolved), as `solve` runs them."""
         from ..estimators import VelocityEstimator, velocity_stream
 
+        ts = self.ts if self.times is None else self.times.array  # concrete for a held step
         stream = velocity_stream(
-            self.ts, pixels, self._camera(pixels), dropped=self._dropped(), truth=self.truth,
+            ts, pixels, self._camera(pixels), dropped=self._dropped(), truth=self.truth,
             throw=False, chunk=self.chunk,
         )  # fmt: skip
         est = VelocityEstimator(
@@ -296,7 +302,9 @@ class VelocityProblem(AbstractProblem):
         stream, est = self._estimator(self.resolve(params), inputs["pixels"])
         t0 = self.ts[0]
         a, b = self.window
-        return velocity_innovation(stream, solution, est, t_start=t0 + a, t_end=t0 + b + 1e-9)
+        return velocity_innovation(
+            stream, solution, est, t_start=t0 + a, t_end=t0 + b + 1e-9, step=self.dt
+        )
 
     def uncertainty(self, method, solution):
         """`rms_std` (6,): per degree of freedom, the fit's predicted standard deviation of
@@ -349,6 +357,7 @@ class VelocityProblem(AbstractProblem):
             "per_run": "pixel noise; homography, decomposition and J recomputed",
             "latency": "batch: one fit over all frames per call; others: per sample",
             "chunk": self.chunk,
+            "integration_step_s": self.dt,
         }
 
     def figure(self, method, solution):
@@ -400,7 +409,7 @@ def velocity_problem(
     object frame's origin, `depth_from_known_length`). `robust`: the baselines' robust
     settings (`VelocityProblem`).
     """
-    from ..estimators import fixed_camera
+    from ..estimators import VelocityEstimator, fixed_camera, integration_step, velocity_stream
     from .chitrakaran import K_EQ63, RHO_EQ63, section6_scenario, window
 
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
@@ -439,8 +448,12 @@ def velocity_problem(
         dropped="hold" if dropouts else "stop",
     )
     n_star, z1_star = camera.n_star, camera.z1_star
-    jerk = (0.2 if data is None else 1.0) if max_jerk is None else float(max_jerk)
     K, rho = jnp.asarray(K, float), jnp.asarray(rho, float)
+    # the estimator's integration step: `run`'s rule (`dt="auto"`) at the default gains,
+    # chosen once here (the file's own rate where the gains allow it, else a held step)
+    stream = velocity_stream(ts, clean, camera, dropped="hold" if dropouts else "stop")
+    dt = integration_step(stream, VelocityEstimator(K=K, rho=rho))
+    jerk = (0.2 if data is None else 1.0) if max_jerk is None else float(max_jerk)
     return VelocityProblem(
         ts=ts,
         clean=jnp.asarray(clean, float),
@@ -461,6 +474,8 @@ def velocity_problem(
         chunk=chunk,
         source=Note(source),
         interval=float(np.median(np.diff(np.asarray(ts)))),
+        dt=dt,
+        times=None if dt is None else Frozen(np.asarray(ts)),
         known_length=None if known_length is None else _length(known_length),
         constants=constants,
         adjoint=DirectAdjoint() if adjoint is None else adjoint,
