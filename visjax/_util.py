@@ -124,6 +124,15 @@ def covariance(residuals, y, args, count) -> tuple:
     return cov, sigma2
 
 
+def number_text(x, spec: str = "g") -> str:
+    """A number for a title: `format(float(x), spec)`, or "traced" for a traced value (a
+    problem's data parameter inside a sweep)."""
+    try:
+        return format(float(x), spec)
+    except (TypeError, jax.errors.ConcretizationTypeError):
+        return "traced"
+
+
 class Frozen:
     """A NumPy array held as a static value (hashed by its bytes, equal by its values): a
     setting that fixes a compiled program's structure, such as the sample times a held

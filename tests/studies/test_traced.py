@@ -12,6 +12,7 @@ import pytest
 
 from tests.example_data import velocity_example
 from visjax import RESULTS, papers, studies
+from visjax.papers import hamel, spica
 
 
 class _Compiles(logging.Handler):
@@ -121,3 +122,38 @@ def test_the_gradient_reaches_the_intrinsics_and_a_reference_pixel():
         fd = (loss(A, reference.at[i, j].add(h)) - loss(A, reference.at[i, j].add(-h))) / (2 * h)
         assert float(grad_ref[i, j]) == pytest.approx(float(fd), rel=1e-4)
         assert float(grad_ref[i, j]) != 0.0
+
+
+@pytest.mark.parametrize(
+    "build",
+    [
+        lambda: papers.static_points_problem(noise_px=0.1, duration=2.0, rate_hz=20.0),
+        lambda: papers.moving_point_problem(noise_px=0.1, duration=2.0),
+        lambda: spica.point_depth_problem(noise_px=0.1, duration=0.2),
+        lambda: hamel.homography_problem(noise_px=0.1, duration=0.2),
+        lambda: hamel.homography_problem(noise_px=0.1, duration=0.2, variant="velocity_front_end"),
+    ],
+    ids=["static_points", "moving_point", "point_depth", "homography", "front_end"],
+)
+def test_the_noise_level_is_a_data_parameter(build):
+    """`noise_px` is a non-negative `Parameter` (default the problem's level) that sets the
+    problem's own field (`at`), traceably; it is not one of the gains."""
+    problem = build()
+    spec = problem.parameters()["noise_px"]
+    assert spec.default == 0.1 and spec.nonnegative and not spec.positive
+    assert "noise_px" not in problem.gains({})
+    moved = problem.at({"noise_px": jnp.asarray(0.3)})
+    assert float(getattr(moved, "base", moved).noise_px) == 0.3
+
+    @jax.jit
+    def spread(level):  # the draw's noise, traced through the problem
+        q = problem.at({"noise_px": level})
+        base = problem.at({"noise_px": jnp.asarray(0.0)})
+        key = jax.random.key(0)
+        pixels = [p.inputs(key) for p in (q, base)]
+        pixels = [x["pixels"] if isinstance(x, dict) else x for x in pixels]
+        return jnp.nanstd(pixels[0] - pixels[1])
+
+    assert float(spread(jnp.asarray(0.5))) == pytest.approx(0.5, rel=0.1)
+    with pytest.raises(ValueError, match="must not be negative"):
+        studies.check_values(problem, {"noise_px": -1.0}, "test")

@@ -8,9 +8,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._util import Note
+from .._util import Note, number_text
 from ..estimators import AbstractAdjoint, DirectAdjoint
-from ..studies import AbstractProblem, Parameter, as_default, held
+from ..studies import AbstractProblem, Parameter, as_default, held, noise_parameter
 
 
 class MovingPointProblem(AbstractProblem):
@@ -35,6 +35,7 @@ class MovingPointProblem(AbstractProblem):
     metric = "rms_worst"
     label = "worst-axis RMS position, second half (m)"
     trivial_label = "the initial depth guess"
+    data_parameters = ("noise_px",)
     grid = "K_scale=0.1:10:7,Y_scale=0.1:10:7"
 
     ts: Any  # the observer's samples (the frames held at 1 kHz for a scene)
@@ -46,7 +47,7 @@ class MovingPointProblem(AbstractProblem):
     truth_ts: Any
     truth: Any  # the true position in the observer's units (cm for a thesis set), or None
     observer: Any  # the reference observer (the published or designed gains)
-    noise_px: float = eqx.field(static=True)
+    noise_px: Any  # a data parameter (`at`): a sweep over noise levels is one `vmap`
     to_m: float = eqx.field(static=True)
     moving: bool = eqx.field(static=True)
     window_s: tuple = eqx.field(static=True)
@@ -59,7 +60,7 @@ class MovingPointProblem(AbstractProblem):
 
     @property
     def title(self) -> str:
-        return f"moving point (Jang's thesis), {self.source}, {self.noise_px:g} px noise"
+        return f"moving point (Jang's thesis), {self.source}, {number_text(self.noise_px)} px noise"
 
     @property
     def scored(self) -> bool:
@@ -71,6 +72,7 @@ class MovingPointProblem(AbstractProblem):
             "Y": Parameter(as_default(self.observer.Y), "", False, "observer gain Y (3 x 2)"),
             "K_scale": Parameter(1.0, "", True, "multiplier of K"),
             "Y_scale": Parameter(1.0, "", True, "multiplier of Y"),
+            "noise_px": noise_parameter(self.noise_px),
         }
 
     def gains(self, params) -> dict:
@@ -194,14 +196,14 @@ class MovingPointProblem(AbstractProblem):
     def settings(self) -> dict:
         out = {
             "source": self.source,
-            "noise_px": self.noise_px,
+            "noise_px": float(self.noise_px),
             "observer_step_s": float(self.ts[1] - self.ts[0]),
             "point_model": "constant velocity" if self.moving else "static",
             "batch": "all frames up to t (causal)",
             "window_frames": self.window_frames,
             "scoring_window_s": list(self.window_s),
             "scoring": "against the true position, second half of the run (metres)",
-            "ekf_r_norm": max(self.noise_px, 0.05) / float(self.Kc[0, 0]),
+            "ekf_r_norm": max(float(self.noise_px), 0.05) / float(self.Kc[0, 0]),
             "ekf_depth0": float(1.0 / self.observer.x3_guess),
         }
         if self.set_name is not None:
@@ -336,7 +338,7 @@ def moving_point_problem(
             truth_ts=frame_ts,
             truth=truth,
             observer=observer,
-            noise_px=float(noise_px),
+            noise_px=jnp.asarray(float(noise_px)),
             to_m=1.0,
             moving=True,
             window_s=(t0 + (t1 - t0) / 2, t1 + 1.0),
@@ -363,7 +365,7 @@ def moving_point_problem(
         truth_ts=sc.ts,
         truth=sc.position * 100.0,  # the observer's units: the thesis' centimetres
         observer=jang.observer(set_name),
-        noise_px=float(noise_px),
+        noise_px=jnp.asarray(float(noise_px)),
         to_m=0.01,
         moving=jang.SETS[set_name].moving,
         window_s=(duration / 2, duration + 1.0),

@@ -10,9 +10,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._util import Frozen, Note
+from .._util import Frozen, Note, number_text
 from ..estimators import AbstractAdjoint, DirectAdjoint
-from ..studies import AbstractProblem, Parameter
+from ..studies import AbstractProblem, Parameter, noise_parameter
 
 # the robust settings (a stated choice, not tuned to any result): the Cauchy loss, whose
 # influence vanishes for large residuals (Huber's bounded influence still lets a third of a
@@ -70,6 +70,7 @@ class StaticPointsProblem(AbstractProblem):
     metric = "error_worst"
     label = "worst final position error (m)"
     trivial_label = "the initial guess"
+    data_parameters = ("noise_px",)
     grid = "alpha_scale=0.1:10:5,gamma_scale=0.1:10:5"
 
     ts: Any
@@ -82,7 +83,7 @@ class StaticPointsProblem(AbstractProblem):
     R_c_nominal: Any
     x_c_nominal: Any
     n_known: int = eqx.field(static=True)
-    noise_px: float = eqx.field(static=True)
+    noise_px: Any  # a data parameter (`at`): a sweep over noise levels is one `vmap`
     dt: float | None = eqx.field(static=True)
     window_frames: int = eqx.field(static=True)
     every_frames: int = eqx.field(static=True)
@@ -96,7 +97,7 @@ class StaticPointsProblem(AbstractProblem):
     def title(self) -> str:
         return (
             f"static points, uncalibrated camera (Nath et al.), {self.source}, "
-            f"{self.noise_px:g} px noise" + (", robust baselines" if self.robust else "")
+            f"{number_text(self.noise_px)} px noise" + (", robust baselines" if self.robust else "")
         )
 
     @property
@@ -107,10 +108,13 @@ class StaticPointsProblem(AbstractProblem):
         return {
             "alpha_scale": Parameter(1.0, "", True, "multiplier of alpha_c and alpha"),
             "gamma_scale": Parameter(1.0, "", True, "multiplier of eta0, eta1, gamma_s0"),
+            "noise_px": noise_parameter(self.noise_px),
         }
 
     def gains(self, params) -> dict:
-        return {k: float(v) for k, v in self.resolve(params).items()}
+        return {
+            k: float(v) for k, v in self.resolve(params).items() if k not in self.data_parameters
+        }
 
     def inputs(self, key):
         from ..sim import add_pixel_noise
@@ -175,7 +179,7 @@ class StaticPointsProblem(AbstractProblem):
             std = sol.diagnostics.omega_s_std[-1]
         elif method == "ekf":
             sol = static_points_ekf(
-                est, stream, self.omega_c, r_px=max(self.noise_px, 0.05),
+                est, stream, self.omega_c, r_px=jnp.maximum(self.noise_px, 0.05),
                 gate=ROBUST_GATE if self.robust else None, throw=False,
             )  # fmt: skip
             omega_s = sol.outputs.omega_s[-1]
@@ -227,14 +231,14 @@ class StaticPointsProblem(AbstractProblem):
     def settings(self) -> dict:
         return {
             "source": self.source,
-            "noise_px": self.noise_px,
+            "noise_px": float(self.noise_px),
             "estimator": "from_nominal (gains from the scene's scale), 1 kHz on held samples",
             "reference_gains": "from_nominal's derived gains (Nath et al. give none for "
             "this scene)",
             "integration_step_s": self.dt,
             "window_frames": self.window_frames,
             "window_every_frames": self.every_frames,
-            "ekf_r_px": max(self.noise_px, 0.05),
+            "ekf_r_px": max(float(self.noise_px), 0.05),
             "robust": (
                 f"bundle adjustments: Cauchy loss, scale {ROBUST_SCALE_PX:g} px (batch: then "
                 f"least squares without the observations beyond {ROBUST_REJECT_PX:g} px); "
@@ -327,7 +331,7 @@ def static_points_problem(
         R_c_nominal=R_n,
         x_c_nominal=x_n,
         n_known=int(n_known),
-        noise_px=float(noise_px),
+        noise_px=jnp.asarray(float(noise_px)),
         dt=None if dt is None else float(dt),
         window_frames=max(2, int(round(window_s / interval))),
         every_frames=max(1, int(round(every_s / interval))),

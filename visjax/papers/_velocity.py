@@ -5,13 +5,12 @@ fixed camera*), with the paper's estimator and its baselines."""
 from typing import Any
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._util import Frozen, Note
+from .._util import Frozen, Note, number_text
 from ..estimators import AbstractAdjoint, DirectAdjoint
-from ..studies import AbstractProblem, Parameter, as_default, held
+from ..studies import AbstractProblem, Parameter, as_default, held, noise_parameter
 
 # the robust settings (a stated choice, not tuned to any result; those of the static-points
 # problem): the Cauchy loss, whose influence vanishes for large residuals, at 1 px
@@ -69,6 +68,7 @@ class VelocityProblem(AbstractProblem):
     metric = "rms_worst"
     label = "worst-axis RMS over the window (m/s, rad/s)"
     trivial_label = "zero velocity"
+    data_parameters = ("noise_px",)
     grid = "K_scale=1e-3:1e1:9,rho_scale=1e-3:1e1:9"
 
     ts: Any
@@ -99,9 +99,9 @@ class VelocityProblem(AbstractProblem):
 
     @property
     def title(self) -> str:
-        return f"velocity (Chitrakaran et al.), {self.source}, {_noise(self.noise_px)} noise" + (
-            ", robust baselines" if self.robust else ""
-        )
+        noise = number_text(self.noise_px)
+        robust = ", robust baselines" if self.robust else ""
+        return f"velocity (Chitrakaran et al.), {self.source}, {noise} px noise{robust}"
 
     @property
     def scored(self) -> bool:
@@ -113,13 +113,7 @@ class VelocityProblem(AbstractProblem):
             "rho": Parameter(as_default(self.rho), "", True, "gain rho of eq. (40), diagonal"),
             "K_scale": Parameter(1.0, "", True, "multiplier of K"),
             "rho_scale": Parameter(1.0, "", True, "multiplier of rho"),
-            "noise_px": Parameter(
-                float(self.noise_px),
-                "px",
-                False,
-                "standard deviation of the Gaussian pixel noise of each draw",
-                nonnegative=True,
-            ),
+            "noise_px": noise_parameter(self.noise_px),
         }
 
     def gains(self, params) -> dict:
@@ -451,7 +445,7 @@ def velocity_problem(
     K, rho = jnp.asarray(K, float), jnp.asarray(rho, float)
     # the estimator's integration step: `run`'s rule (`dt="auto"`) at the default gains,
     # chosen once here (the file's own rate where the gains allow it, else a held step)
-    stream = velocity_stream(ts, clean, camera, dropped="hold" if dropouts else "stop")
+    stream = velocity_stream(ts, clean, camera, dropped="hold" if dropouts else "stop", throw=False)
     dt = integration_step(stream, VelocityEstimator(K=K, rho=rho))
     jerk = (0.2 if data is None else 1.0) if max_jerk is None else float(max_jerk)
     return VelocityProblem(
@@ -481,13 +475,6 @@ def velocity_problem(
         adjoint=DirectAdjoint() if adjoint is None else adjoint,
         robust=bool(robust),
     )
-
-
-def _noise(noise_px) -> str:
-    try:
-        return f"{float(noise_px):g} px"
-    except (TypeError, jax.errors.ConcretizationTypeError):  # traced (a noise sweep)
-        return "swept px"
 
 
 def _length(known_length) -> tuple:

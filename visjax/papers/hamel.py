@@ -58,6 +58,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS
+from .._util import number_text
 from ..estimators import (
     AbstractJumpEstimator,
     SaveAt,
@@ -74,7 +75,7 @@ from ..geometry import (
     skew,
     sl3_normalize,
 )
-from ..studies import AbstractProblem, Parameter
+from ..studies import AbstractProblem, Parameter, noise_parameter
 
 
 class HomographyMeasurement(eqx.Module):
@@ -401,19 +402,22 @@ class HomographyProblem(AbstractProblem):
     title: ClassVar[str] = "homography of a planar target (Hamel et al.)"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 
+    data_parameters: ClassVar[tuple[str, ...]] = ("noise_px",)
+
     scene: HomographyScene
-    noise_px: float = eqx.field(static=True, default=0.0)
+    noise_px: Any = 0.0  # a data parameter (`at`); the builder makes it an array
     robust: bool = eqx.field(static=True, default=False)
 
     def parameters(self):
         return {
             "k_P": Parameter(30.0, "1/s", True, "the gain of the innovation"),
             "k_I": Parameter(10.0, "1/s^2", False, "the integral gain (method gyro)"),
+            "noise_px": noise_parameter(self.noise_px),
         }
 
     def settings(self):
         return {
-            "noise_px": self.noise_px,
+            "noise_px": float(self.noise_px),
             "samples": int(self.scene.ts.shape[0]),
             "points": int(self.scene.reference.shape[0]),
             "ransac_threshold_px": 3.0,
@@ -515,7 +519,7 @@ class HomographyProblem(AbstractProblem):
         ax.semilogy(np.asarray(self.scene.ts), err, lw=0.8)
         ax.set_xlabel("t (s)")
         ax.set_ylabel(r"$\|\hat H H^{-1} - I\|_F$")
-        ax.set_title(f"{self.title}: {method}, {self.noise_px:g} px")
+        ax.set_title(f"{self.title}: {method}, {number_text(self.noise_px)} px")
         fig.tight_layout()
         return fig
 
@@ -571,6 +575,19 @@ class VelocityFrontEndProblem(AbstractProblem):
             "k_P": Parameter(100.0, "1/s", True, "the observer's innovation gain"),
             "k_I": Parameter(1e4, "1/s^2", True, "the observer's integral gain"),
         }
+
+    @property
+    def data_parameters(self):
+        return self.base.data_parameters
+
+    @property
+    def noise_px(self):
+        """The velocity problem's noise level (a data parameter)."""
+        return self.base.noise_px
+
+    def at(self, params):
+        """The velocity problem's data parameters (its noise level) set (`at`)."""
+        return eqx.tree_at(lambda p: p.base, self, self.base.at(params))
 
     def settings(self):
         return {**self.base.settings(), "observer_group_velocity": "none measured (k_I)"}
@@ -638,7 +655,9 @@ def homography_problem(
     variant = variant or "tracking"
     if variant == "tracking":
         scene = homography_scene(2.0 if duration is None else duration, rate_hz)
-        return HomographyProblem(scene=scene, noise_px=float(noise_px), robust=bool(robust))
+        return HomographyProblem(
+            scene=scene, noise_px=jnp.asarray(float(noise_px)), robust=bool(robust)
+        )
     if robust:
         raise ValueError('--robust applies to the variant "tracking" only')
     if variant == "velocity_front_end":

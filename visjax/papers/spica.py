@@ -46,6 +46,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS
+from .._util import number_text
 from ..baselines import AbstractEKFModel, cauchy, extended_kalman_filter, triangulate_point
 from ..estimators import (
     AbstractEstimator,
@@ -59,7 +60,7 @@ from ..estimators import (
     run,
 )
 from ..geometry import pixel_to_normalized, skew
-from ..studies import AbstractProblem, Parameter
+from ..studies import AbstractProblem, Parameter, noise_parameter
 
 _Projection = Literal["planar", "spherical"]
 
@@ -367,9 +368,10 @@ class PointDepthProblem(AbstractProblem):
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
+    data_parameters: ClassVar[tuple[str, ...]] = ("noise_px",)
 
     scene: PointDepthScene
-    noise_px: float = eqx.field(static=True, default=0.0)
+    noise_px: Any = 0.0  # a data parameter (`at`); the builder makes it an array
     projection: str = eqx.field(static=True, default="planar")
     window: int = eqx.field(static=True, default=250)
     robust: bool = eqx.field(static=True, default=False)
@@ -385,11 +387,12 @@ class PointDepthProblem(AbstractProblem):
             "alpha": Parameter(1000.0, "1/m^2", True, "the inverse depth's gain"),
             "h": Parameter(20.0, "1/s", True, "the measured part's gain, H = h I"),
             "chi0": Parameter(1.0 / 1.5, "1/m", True, "the initial inverse depth"),
+            "noise_px": noise_parameter(self.noise_px),
         }
 
     def settings(self):
         return {
-            "noise_px": self.noise_px,
+            "noise_px": float(self.noise_px),
             "projection": self.projection,
             "window_samples": self.window,
             "samples": int(self.scene.ts.shape[0]),
@@ -450,7 +453,7 @@ class PointDepthProblem(AbstractProblem):
     def _ekf(self, params, inputs):
         sc = self.scene
         focal = sc.K[0, 0]
-        sigma = max(self.noise_px, 0.1)
+        sigma = jnp.maximum(self.noise_px, 0.1)
         model = InverseDepthModel(q_s=1e-8, q_chi=1e-8, r=(sigma / focal) ** 2)
         chi0 = params["chi0"]
 
@@ -545,7 +548,7 @@ class PointDepthProblem(AbstractProblem):
         ax.axhline(0.05, color="k", lw=0.6, ls="--")
         ax.set_xlabel("t (s)")
         ax.set_ylabel("relative depth error")
-        ax.set_title(f"{self.title}: {method}, {self.projection}, {self.noise_px:g} px")
+        ax.set_title(f"{self.title}: {method}, {self.projection}, {number_text(self.noise_px)} px")
         ax.legend(fontsize=7)
         fig.tight_layout()
         return fig
@@ -572,7 +575,7 @@ def point_depth_problem(
     window = max(2, int(round(window_s * rate_hz)))
     return PointDepthProblem(
         scene=point_depth_scene(duration, rate_hz),
-        noise_px=float(noise_px),
+        noise_px=jnp.asarray(float(noise_px)),
         projection=projection,
         window=window,
         robust=bool(robust),

@@ -99,7 +99,11 @@ def add_pixel_noise(
     """Pixels plus i.i.d. Gaussian noise of standard deviation `sigma` (px) on every
     coordinate; `sigma = 0` returns them unchanged (then `key` may be `None`)."""
     pixels = as_float(pixels)
-    if isinstance(sigma, jax.core.Tracer):  # traced (a sweep over noise levels)
+    try:
+        level = float(sigma)
+    except (TypeError, jax.errors.ConcretizationTypeError):
+        level = None  # traced (a sweep over noise levels)
+    if level is None or isinstance(sigma, jax.Array):  # no Python branch on an array's value
         if key is None:
             raise ValueError("a PRNG `key` is required for a traced pixel noise level.")
         sigma = eqx.error_if(sigma, sigma < 0, "the pixel noise must be non-negative")

@@ -9,7 +9,6 @@ methods take (`parameters`: defaults, units, positivity) and how a solution is s
 """
 
 import abc
-import dataclasses
 import hashlib
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
@@ -45,6 +44,20 @@ class Parameter(eqx.Module):
         return np.asarray(self.default, float)
 
 
+def noise_parameter(noise_px) -> Parameter:
+    """The `noise_px` parameter of a problem whose draws add Gaussian pixel noise: a data
+    parameter (`AbstractProblem.at`: it sets the problem's own `noise_px` field), so a
+    sweep over noise levels is one compiled program; its default the problem's level."""
+    try:
+        default = float(noise_px)
+    except (TypeError, jax.errors.ConcretizationTypeError):
+        default = 0.0  # traced: shown only; `resolve` takes the problem's own field
+    return Parameter(
+        default, "px", False, "standard deviation of the Gaussian pixel noise of each draw",
+        nonnegative=True,
+    )  # fmt: skip
+
+
 def as_default(x) -> float | tuple:
     """A number or an array as a `Parameter.default` (a float, or nested tuples)."""
     x = np.asarray(x, float)
@@ -73,7 +86,9 @@ class AbstractProblem(eqx.Module):
     - `metrics(method, solution)`: name -> array, against the truth the problem holds
         (pure JAX; computed inside `vmap`).
 
-    Optional: `label` (the headline metric with its units); `grid` (the default grid of
+    Optional: `data_parameters` (the parameters that are data, not gains: each sets the
+    problem's field of the same name, `at`, e.g. `noise_px`, `noise_parameter`); `label`
+    (the headline metric with its units); `grid` (the default grid of
     `visjax sweep`, a `parse_grid` spec); `title` (a one-line description); `scored`
     (whether there is a truth to score against; default `True`); `settings()` (every
     stated setting, JSON-able); `updates(method)` (estimate updates per call, for the
@@ -100,6 +115,7 @@ class AbstractProblem(eqx.Module):
     grid: ClassVar[str] = ""
     defaults_label: ClassVar[str] = "paper"
     trivial_label: ClassVar[str] = "the trivial estimate"
+    data_parameters: ClassVar[tuple[str, ...]] = ()
 
     @abc.abstractmethod
     def parameters(self) -> dict[str, Parameter]:
@@ -132,7 +148,8 @@ class AbstractProblem(eqx.Module):
         return 1
 
     def gains(self, params: Mapping[str, Any]) -> dict:
-        return {k: np.asarray(v).tolist() for k, v in self.resolve(params).items()}
+        data = set(self.data_parameters)
+        return {k: np.asarray(v).tolist() for k, v in self.resolve(params).items() if k not in data}
 
     def checks(self, params: Mapping[str, Any]) -> dict:
         return {}
@@ -212,20 +229,19 @@ class AbstractProblem(eqx.Module):
             if name in params:
                 given = jnp.asarray(params[name], dtype=value.dtype)
                 out[name] = jnp.broadcast_to(given, value.shape)
+            elif name in self.data_parameters:  # the problem's own (traced) value
+                own = jnp.asarray(getattr(self, name), dtype=value.dtype)
+                out[name] = jnp.broadcast_to(own, value.shape)
             else:
                 out[name] = jnp.asarray(value)
         return out
 
     def at(self, params: Mapping[str, Any]) -> "AbstractProblem":
-        """The problem with its data parameters set from `params`: a parameter whose name is
-        also a (non-static) field of the problem, such as a noise level `noise_px`, replaces
-        that field, so `inputs` reads it from `self` and a sweep over it is one `vmap`.
-        Every study calls it before `inputs` and `solve` (traceable)."""
-        names = [
-            f.name
-            for f in dataclasses.fields(self)
-            if f.name in params and not f.metadata.get("static", False)
-        ]
+        """The problem with its data parameters (`data_parameters`) set from `params`: each
+        replaces the (non-static) field of the same name, such as a noise level `noise_px`,
+        so `inputs` reads it from `self` and a sweep over it is one `vmap`. Every study
+        calls it before `inputs` and `solve` (traceable)."""
+        names = [n for n in self.data_parameters if n in params]
         if not names:
             return self
         return eqx.tree_at(
