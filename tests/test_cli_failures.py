@@ -243,7 +243,7 @@ def test_tune_measures_its_chunk_before_it_runs(monkeypatch, capsys):
         raise AssertionError("the tuning started")
 
     monkeypatch.setattr(studies, "tune", never)
-    monkeypatch.setattr(_sweep, "_available_memory", lambda: 1000.0)
+    monkeypatch.setattr(_sweep, "available_memory", lambda: 800.0)
     argv = [*TOY, "tune", "slow-toy", "--grid", "gain=1/2", "--seeds", "2", "--quiet"]
     assert main(argv) == 2
     err = capsys.readouterr().err

@@ -94,12 +94,6 @@ def chunked_map(f, xs, batch_size: int):
     return jax.tree_util.tree_map(assemble, ys)
 
 
-def command_x64() -> None:
-    """The commands (`visjax.report`, `visjax.verbs`) run in float64; the library itself
-    never flips the flag."""
-    jax.config.update("jax_enable_x64", True)
-
-
 def covariance(residuals, y, args, count) -> tuple:
     """The covariance of the estimate `y` (a pytree) of `residuals(y, args)` (any shape;
     the rows of unseen data zero), `count` the number of residual components that carry

@@ -370,6 +370,9 @@ def main(argv=None) -> int:
     from ._xla_workaround import apply_xla_cpu_workarounds
 
     apply_xla_cpu_workarounds()  # the command line's own choice; `import visjax` sets nothing
+    import jax
+
+    jax.config.update("jax_enable_x64", True)  # float64 on the command line, set here once
     parser = build_parser()
     args = parser.parse_args(argv)
     from .io import DataFormatError, OutputConflictError, staged_output

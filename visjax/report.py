@@ -29,11 +29,9 @@ def _report(kind: str, settings: dict, out, formats, reproduce) -> dict:
     """Run `reproduce(write)` (a papers reproduction), writing its files into `out` as they
     come (nothing without `out`), then its summary; print its lines and the files written;
     raise its failure, if any, after everything is written (`RunFailed`)."""
-    from ._util import command_x64
     from .io import command_summary, write_outputs
 
     started = time.perf_counter()
-    command_x64()
     out = None if out is None else Path(out)
     written = []
 
@@ -361,7 +359,6 @@ def reproduce(out="results", quick: bool = False, quiet: bool = False, formats=(
     runs as `QUICK` says."""
     import pandas as pd
 
-    from ._util import command_x64
     from .io import command_summary
     from .papers import chitrakaran, jang, nath
 
@@ -400,7 +397,6 @@ def reproduce(out="results", quick: bool = False, quiet: bool = False, formats=(
         bound = "< " if row["reference_kind"] == "bound" else ""
         reference = f"{row['reference_kind']} {bound}{row['reference']:.4g}"
         print(f"{row['what']:<62}{value:>12} {row['unit']:<13}({reference})")
-    command_x64()
     out.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(table, columns=list(columns)).astype(
         {"value": float, "reference": float}

@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._util import command_x64
 from .io import command_summary, figure_files
+from .studies import available_memory
 
 MAX_RUNS = 10**9
 """The most runs one study command makes (grid points x seeds, the held-out runs, the
@@ -112,23 +112,6 @@ def grid_size(spec: str) -> int | None:
             return None
         size *= max(n, 0)
     return size
-
-
-def available_memory() -> float | None:
-    """Bytes of memory this process may still take: 80% of the memory available now
-    (`MemAvailable` of /proc/meminfo, else the free pages), as `studies.sweep`'s
-    `max_memory="available"` takes it; `None` where the system does not say."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return 0.8 * float(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return 0.8 * float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def _runs(command, points, seeds, steps, methods) -> int:
@@ -231,7 +214,6 @@ def check_study(
         points = f"{count} grid points x {seeds} seeds" if grid else f"{seeds} seeds"
         points += f" and {steps} steps" if command == "tune" else ""
         _too_many(command, n_variants * _runs(command, count, seeds, steps, 1), points)
-    command_x64()
     from .studies import registered
 
     entry = registered(problem)
@@ -300,7 +282,6 @@ def run_command(
     `visjax.report.RunFailed`."""
     started = time.perf_counter()
     settings = _settings(locals())
-    command_x64()
     import jax
 
     from ._results import result_names
@@ -466,7 +447,6 @@ def compare_command(
     `dropped_fraction` (each run's result code is its own: many runs, no failed command)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    command_x64()
     import pandas as pd
 
     from . import studies
@@ -809,7 +789,6 @@ def sweep_command(
     the chunks as tasks on a Ray cluster (a local one without an address)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    command_x64()
     from . import studies
 
     devices, job = _job_slice(shard)
@@ -1002,7 +981,6 @@ def tune_command(
     `history.csv`, `sweep.png`, `tune.png` and `summary.json` (kind `tune`)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    command_x64()
     import jax.numpy as jnp
     import optax
     import pandas as pd

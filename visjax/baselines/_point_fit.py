@@ -400,9 +400,9 @@ class _InverseDepth(AbstractEKFModel):
 def moving_point_ekf(
     stream: Stream,
     *,
-    r_norm: float,
-    depth0: float,
-    sigma_depth0: float,
+    r_norm: Float[ArrayLike, ""],
+    depth0: Float[ArrayLike, ""],
+    sigma_depth0: Float[ArrayLike, ""],
     q_velocity: float,
     sigma_velocity0: float = 0.0,
     substeps: int = 1,

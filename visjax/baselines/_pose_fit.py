@@ -505,7 +505,7 @@ def velocity_ekf(
     pixels: Float[ArrayLike, "N n 2"],
     camera: FixedCamera,
     *,
-    r_px: float = 0.5,
+    r_px: Float[ArrayLike, ""] = 0.5,
     max_jerk: float = 1.0,
     max_angular_jerk: float = 1.0,
     sigma_velocity: float = 1.0,

@@ -535,12 +535,18 @@ def _sample_interval(ts):
     return (ts[-1] - ts[0]) / (ts.shape[0] - 1)
 
 
-@eqx.filter_jit
 def _first_bounds(estimator, stream):
-    """`estimator.step_bounds` at the first sample, compiled: a bound that does not
-    depend on the sample does not compute it (one program, not an eager op per line).
-    The texts and result codes pass through as they are."""
-    return estimator.step_bounds(stream.measurement(0), _sample_interval(stream.ts))
+    """`estimator.step_bounds` at the first sample, compiled on that sample alone (not the
+    whole stream: one program per sample shape, whatever the stream's length): a bound
+    that does not depend on the sample does not compute it (one program, not an eager op
+    per line). The texts and result codes pass through as they are."""
+    raw = jax.tree_util.tree_map(lambda x: x[0], stream.ys)
+    return _bounds_at(estimator, raw, stream.measure, _sample_interval(stream.ts))
+
+
+@eqx.filter_jit
+def _bounds_at(estimator, raw, measure, interval):
+    return estimator.step_bounds(raw if measure is None else measure(raw), interval)
 
 
 def _step_message(estimator, h, bound, what, why) -> str:

@@ -94,7 +94,7 @@ def moving_camera_point(
 
 
 def add_pixel_noise(
-    key: PRNGKeyArray | None, pixels: Float[ArrayLike, "..."], sigma: float
+    key: PRNGKeyArray | None, pixels: Float[ArrayLike, "..."], sigma: Float[ArrayLike, ""]
 ) -> Float[Array, "..."]:
     """Pixels plus i.i.d. Gaussian noise of standard deviation `sigma` (px) on every
     coordinate; `sigma = 0` returns them unchanged (then `key` may be `None`)."""

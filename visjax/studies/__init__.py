@@ -46,6 +46,7 @@ from ._registry import (
 )
 from ._sweep import (
     MemoryLimitError as MemoryLimitError,
+    available_memory as available_memory,
     best as best,
     grid as grid,
     log_axis as log_axis,

@@ -417,9 +417,19 @@ class _ChunkTask:
         return jax.tree_util.tree_map(np.asarray, out)
 
 
-def _available_memory() -> float | None:
+def available_memory() -> float | None:
+    """Bytes of memory this process may still take: 80% of the memory available now
+    (`MemAvailable` of /proc/meminfo, else the free pages), as `sweep`'s `max_memory="available"`
+    and the command line's study checks take it; `None` where the system does not say."""
     try:
-        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return 0.8 * float(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return 0.8 * float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
     except (ValueError, OSError, AttributeError):
         return None
 
@@ -452,8 +462,7 @@ def _check_memory(compiled, leaves, key_data, chunk, max_memory, log):
     if isinstance(limit, str):
         if limit != "available":
             raise ValueError(f'`max_memory` must be bytes or "available"; got {limit!r}.')
-        available = _available_memory()
-        limit = None if available is None else 0.8 * available
+        limit = available_memory()
     if log is not None:
         log(f"memory per chunk of {chunk} runs: {need / 2**20:.1f} MiB")
     if limit is not None and need > limit:
