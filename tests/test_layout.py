@@ -87,3 +87,26 @@ def test_importing_visjax_loads_neither_opencv_nor_cvxpy():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def test_only_the_command_line_sets_float64():
+    """`DESIGN.md`: float64 is set once, in `cli.main`; the library never flips the global
+    flag (`jax.config.update("jax_enable_x64", ...)`, `jax.enable_x64(...)` outside a
+    `with` that restores it)."""
+    found = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        restoring = {
+            id(item.context_expr) for node in ast.walk(tree) if isinstance(node, ast.With)
+            for item in node.items
+        }  # fmt: skip
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.Call) or id(node) in restoring:
+                continue
+            text = ast.unparse(node.func)
+            args = [a.value for a in node.args if isinstance(a, ast.Constant)]
+            if (text.endswith("config.update") and "jax_enable_x64" in args) or text.endswith(
+                "enable_x64"
+            ):
+                found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
+    assert len(found) == 1 and found[0].startswith("cli.py:"), found
