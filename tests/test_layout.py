@@ -110,3 +110,24 @@ def test_only_the_command_line_sets_float64():
             ):
                 found.append(f"{path.relative_to(PACKAGE)}:{node.lineno}")
     assert len(found) == 1 and found[0].startswith("cli.py:"), found
+
+
+def test_every_registered_problem_is_final():
+    """`DESIGN.md`: a paper's problems are `@final` (a method is added to a registered
+    problem without subclassing it); read from each builder's return annotation."""
+    import typing
+
+    import visjax.papers  # noqa: F401  (registers the papers' problems)
+    from visjax import studies
+
+    papers = [
+        n
+        for n in studies.problem_names()
+        if studies.registered(n).build.__module__.startswith("visjax.papers")
+    ]  # not a test's own registered problems
+    assert len(papers) == 5, papers
+    for name in papers:
+        returned = typing.get_type_hints(studies.registered(name).build)["return"]
+        classes = typing.get_args(returned) or (returned,)
+        for cls in classes:
+            assert getattr(cls, "__final__", False), (name, cls.__name__)

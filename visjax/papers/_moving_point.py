@@ -2,7 +2,7 @@
 whose velocity is measured (Jang's thesis), with the unknown input observer and its
 baselines."""
 
-from typing import Any
+from typing import Any, final
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -13,6 +13,7 @@ from ..estimators import AbstractAdjoint, DirectAdjoint
 from ..studies import AbstractProblem, Parameter, as_default, held, noise_parameter
 
 
+@final
 class MovingPointProblem(AbstractProblem):
     """The position of a point (possibly moving) from a moving camera's pixels and measured
     velocity (Jang's thesis). Build it with `moving_point_problem`.

@@ -3,7 +3,7 @@ uncalibrated camera (Nath, Dawson, Tatlicioglu, *Euclidean position estimation o
 features using a moving uncalibrated camera*), with the adaptive estimator and its
 baselines."""
 
-from typing import Any
+from typing import Any, final
 
 import equinox as eqx
 import jax
@@ -40,6 +40,7 @@ class FinalEstimate(eqx.Module):
     omega_s_std: Any = None
 
 
+@final
 class StaticPointsProblem(AbstractProblem):
     """The world positions of static features seen by a camera on a moving platform whose
     intrinsic and extrinsic parameters are only nominally known (Nath et al.). Build it

@@ -2,7 +2,7 @@
 (Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity with a
 fixed camera*), with the paper's estimator and its baselines."""
 
-from typing import Any
+from typing import Any, final
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -34,6 +34,7 @@ def velocity_observer_bandwidth_hz(K) -> list[float]:
     return out
 
 
+@final
 class VelocityProblem(AbstractProblem):
     """The velocity of a moving planar object from a fixed camera's pixels (Chitrakaran et
     al.). Build it with `velocity_problem`.

@@ -49,7 +49,7 @@ Equation numbers: the paper's text was not available to this transcription; the 
 is cited by name and its properties derived above and tested.
 """
 
-from typing import Any, ClassVar
+from typing import Any, ClassVar, final
 
 import equinox as eqx
 import jax
@@ -379,6 +379,7 @@ def _to_observer_convention(G, K):
     return sl3_normalize(jnp.linalg.inv(H))
 
 
+@final
 class HomographyProblem(AbstractProblem):
     """Tracking the homography of a planar target from a moving camera (`homography_scene`):
     the observer of Hamel et al. with the group velocity measured (`estimator`) or only
@@ -535,6 +536,7 @@ def _first_failure_over(results):
     return RESULTS.where(jnp.any(bad), first, RESULTS.successful)
 
 
+@final
 class VelocityFrontEndProblem(AbstractProblem):
     """The velocity problem of Chitrakaran et al. (`visjax.papers.velocity_problem`, its
     scene, noise draws, gains and window) with two front ends for the velocity estimator:

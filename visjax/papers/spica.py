@@ -38,7 +38,7 @@ equations are cited by name, not number; each is the model above, checked agains
 kinematics by the tests.
 """
 
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, final
 
 import equinox as eqx
 import jax
@@ -339,6 +339,7 @@ class LeastSquaresDepth(eqx.Module):
     depth_std: Float[Array, "N n"]
 
 
+@final
 class PointDepthProblem(AbstractProblem):
     """The depth of static points from a moving calibrated camera with known velocity
     (Spica et al.'s observer, module docstring), against a sliding-window least-squares
