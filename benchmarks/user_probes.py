@@ -844,41 +844,41 @@ for name, argv in (
         "sweep_grid_unknown_axis",
         ["sweep", "velocity", "--duration", "0.5", "--grid", "K_scal=0.1/1"],
     ),
-    ("sweep_grid_negative", ["sweep", "point-depth", "--grid", "alpha=-1/2"]),
+    ("sweep_grid_negative", ["sweep", "point_depth", "--grid", "alpha=-1/2"]),
     ("sweep_grid_nan", ["sweep", "homography", "--grid", "k_P=nan/10"]),
     (
         "sweep_grid_inf",
         ["sweep", "static_points", "--duration", "2", "--grid", "alpha_scale=1/inf"],
     ),
-    ("sweep_grid_zero", ["sweep", "point-depth", "--grid", "alpha=0/100"]),
-    ("sweep_grid_log_axis_negative_end", ["sweep", "point-depth", "--grid", "alpha=-10:3000:5"]),
-    ("sweep_grid_1e11_points", ["sweep", "point-depth", "--grid", "alpha=1:10:100000000000"]),
-    ("tune_grid_unknown_axis", ["tune", "point-depth", "--grid", "alpah=100/200"]),
+    ("sweep_grid_zero", ["sweep", "point_depth", "--grid", "alpha=0/100"]),
+    ("sweep_grid_log_axis_negative_end", ["sweep", "point_depth", "--grid", "alpha=-10:3000:5"]),
+    ("sweep_grid_1e11_points", ["sweep", "point_depth", "--grid", "alpha=1:10:100000000000"]),
+    ("tune_grid_unknown_axis", ["tune", "point_depth", "--grid", "alpah=100/200"]),
     ("tune_grid_negative", ["tune", "velocity", "--duration", "0.5", "--grid", "rho_scale=-1/1"]),
-    ("tune_grid_inf", ["tune", "point-depth", "--grid", "alpha=100/inf"]),
-    ("compare_with_grid", ["compare", "point-depth", "--grid", "alpha=1/2"]),
+    ("tune_grid_inf", ["tune", "point_depth", "--grid", "alpha=100/inf"]),
+    ("compare_with_grid", ["compare", "point_depth", "--grid", "alpha=1/2"]),
 ):
     argv_probe(name, "grid", argv)
 
 for name, argv, timeout in (
-    ("compare_seeds_2e9", ["compare", "point-depth", "--seeds", "2000000000"], TIMEOUT_S),
-    ("compare_seeds_0", ["compare", "point-depth", "--seeds", "0"], TIMEOUT_S),
+    ("compare_seeds_2e9", ["compare", "point_depth", "--seeds", "2000000000"], TIMEOUT_S),
+    ("compare_seeds_0", ["compare", "point_depth", "--seeds", "0"], TIMEOUT_S),
     (
         "sweep_seeds_negative",
-        ["sweep", "point-depth", "--grid", "alpha=100/200", "--seeds", "-1"],
+        ["sweep", "point_depth", "--grid", "alpha=100/200", "--seeds", "-1"],
         TIMEOUT_S,
     ),
     (
         "sweep_seeds_1e8_of_50_points",
-        ["sweep", "point-depth", "--grid", "alpha=100:3000:50", "--seeds", "100000000"],
+        ["sweep", "point_depth", "--grid", "alpha=100:3000:50", "--seeds", "100000000"],
         TIMEOUT_S,
     ),
     (
         "tune_seeds_3e9",
-        ["tune", "point-depth", "--grid", "alpha=100/200", "--seeds", "3000000000"],
+        ["tune", "point_depth", "--grid", "alpha=100/200", "--seeds", "3000000000"],
         TIMEOUT_S,
     ),
-    ("compare_seeds_1e6", ["compare", "point-depth", "--seeds", "1000000"], 90.0),
+    ("compare_seeds_1e6", ["compare", "point_depth", "--seeds", "1000000"], 90.0),
 ):
     argv_probe(name, "seeds", argv, timeout=timeout)
 
@@ -888,15 +888,15 @@ for name, extra, benign in (
     ("sweep_chunk_1e12", ["--chunk", "1000000000000"], True),
     ("sweep_shard_3_of_2", ["--shard", "3/2"], False),
 ):
-    argv_probe(name, "chunk", ["sweep", "point-depth", *PD, *extra], benign=benign)
+    argv_probe(name, "chunk", ["sweep", "point_depth", *PD, *extra], benign=benign)
 
 for name, argv in (
-    ("tune_steps_0", ["tune", "point-depth", *PD, "--steps", "0"]),
-    ("tune_steps_1e9", ["tune", "point-depth", *PD, "--steps", "1000000000"]),
-    ("tune_learning_rate_negative", ["tune", "point-depth", *PD, "--learning-rate", "-0.1"]),
-    ("compare_noise_negative", ["compare", "point-depth", "--noise", "-1"]),
-    ("run_duration_1e9", ["run", "point-depth", "--duration", "1e9"]),
-    ("run_duration_0", ["run", "point-depth", "--duration", "0"]),
+    ("tune_steps_0", ["tune", "point_depth", *PD, "--steps", "0"]),
+    ("tune_steps_1e9", ["tune", "point_depth", *PD, "--steps", "1000000000"]),
+    ("tune_learning_rate_negative", ["tune", "point_depth", *PD, "--learning-rate", "-0.1"]),
+    ("compare_noise_negative", ["compare", "point_depth", "--noise", "-1"]),
+    ("run_duration_1e9", ["run", "point_depth", "--duration", "1e9"]),
+    ("run_duration_0", ["run", "point_depth", "--duration", "0"]),
     ("run_unknown_method", ["run", "velocity", "--method", "nosuch"]),
     ("run_unknown_problem", ["run", "velocity_estimator"]),
     ("run_unknown_set", ["run", "moving_point", "--set", "I.9"]),
@@ -1102,7 +1102,7 @@ PROBES += [
 
 @probe("out_compare_into_a_sweeps_folder", "out_other_command")
 def _compare_into_sweep(folder):
-    rc, out, err = visjax(["sweep", "point-depth", *PD, "--out", "out", "--quiet"], folder)
+    rc, out, err = visjax(["sweep", "point_depth", *PD, "--out", "out", "--quiet"], folder)
     if rc != 0 or crashed(rc, err):
         return Outcome(rc, out, err, [f"the sweep failed: exit {rc}"], crashed(rc, err))
     first = (folder / "out" / "summary.json").read_bytes()
@@ -1111,7 +1111,7 @@ def _compare_into_sweep(folder):
         ok = (f / "out" / "summary.json").read_bytes() == first
         return [] if ok else ["the sweep's summary.json was replaced"]
 
-    argv = ["compare", "point-depth", "--seeds", "1", "--out", "out", "--quiet"]
+    argv = ["compare", "point_depth", "--seeds", "1", "--out", "out", "--quiet"]
     return command_probe(lambda f: argv, check=check)(folder)
 
 
@@ -1337,7 +1337,7 @@ PROBES += [
     Probe("out_manifest_lists_users_file", "out_manifest", _forged_manifest(["data.npz"]), False),
 ]
 
-PD_PLANAR = ["sweep", "point-depth", "--set", "planar", "--duration", "0.05", *PD]
+PD_PLANAR = ["sweep", "point_depth", "--set", "planar", "--duration", "0.05", *PD]
 
 
 def _users_variant_folder(link: bool, force: bool):
@@ -1546,7 +1546,7 @@ def _ray_closed(folder):
 for name, argv in (
     ("sweep_seed_2_64", [*PD_PLANAR, "--seed", "18446744073709551616"]),
     ("sweep_seed_2_63_minus_1", [*PD_PLANAR, "--seed", "9223372036854775807"]),
-    ("tune_seed_2_63", ["tune", "point-depth", *PD, "--seed", "9223372036854775808"]),
+    ("tune_seed_2_63", ["tune", "point_depth", *PD, "--seed", "9223372036854775808"]),
     (
         "velocity_seeds_1e6",
         [

@@ -190,7 +190,7 @@ def test_durations_and_methods_are_refused_before_building(capsys):
     assert "1e+12 samples" in err and "MAX_STEPS" in err
     err = _refused(["velocity", "--duration", "1e9"], capsys)
     assert "1e+12 samples" in err
-    err = _refused(["sweep", "point-depth", "--duration", "2e5", "--rate", "1000"], capsys)
+    err = _refused(["sweep", "point_depth", "--duration", "2e5", "--rate", "1000"], capsys)
     assert "2e+08 samples" in err
     err = _refused(["run", "velocity", "--method", "ekff"], capsys)
     assert "no method 'ekff' (did you mean 'ekf'?)" in err

@@ -185,19 +185,19 @@ def test_problem_estimator_and_least_squares_on_the_same_draws():
 
 @pytest.mark.slow  # the unit tier's time: `compare` has its smoke test (test_command_smoke)
 def test_compare_command(tmp_path):
-    """`visjax compare point-depth`: the records of both methods with their result codes,
+    """`visjax compare point_depth`: the records of both methods with their result codes,
     through the generic command (the registry line is the only change it needed)."""
     out = tmp_path / "compare"
-    argv = ["compare", "point-depth", "--seeds", "2", "--noise", "0.5", "--quiet"]
+    argv = ["compare", "point_depth", "--seeds", "2", "--noise", "0.5", "--quiet"]
     assert main([*argv, "--out", str(out)]) == 0
     records = pd.read_parquet(out / "records.parquet")
     assert set(records["method"]) == {"estimator", "least_squares", "ekf"}
     assert list(records["seed"]) == [0, 1, 0, 1] or set(records["seed"]) == {0, 1}
     est = records[records["method"] == "estimator"]
     assert (est["result"] == "successful").all() and (est["depth_error"] < 0.03).all()
-    # `visjax run point-depth`: its figure (every point's relative depth error over time)
+    # `visjax run point_depth`: its figure (every point's relative depth error over time)
     run_out = tmp_path / "run"
-    argv = ["run", "point-depth", "--duration", "0.3", "--quiet", "--out", str(run_out)]
+    argv = ["run", "point_depth", "--duration", "0.3", "--quiet", "--out", str(run_out)]
     assert main(argv) == 0 and next(run_out.rglob("run.png")).stat().st_size > 0
 
 

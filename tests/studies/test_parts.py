@@ -173,7 +173,7 @@ def test_memory_estimate_refuses_a_chunk_too_large(problem, points):
 def test_command_shards_merge_and_force(tmp_path, capsys):
     """`visjax sweep --shard i/N` into one --out, `visjax merge`, against the whole sweep;
     a finished sweep is not replaced without --force."""
-    base = ["sweep", "point-depth", "--set", "planar", "--duration", "0.05", "--seeds", "2"]
+    base = ["sweep", "point_depth", "--set", "planar", "--duration", "0.05", "--seeds", "2"]
     base += ["--grid", "alpha=300:3000:6", "--chunk", "4", "--noise", "0.5", "--quiet"]
     whole = tmp_path / "whole"
     assert main([*base, "--out", str(whole)]) == 0

@@ -253,8 +253,12 @@ def test_registry():
 
     studies.register_problem("toy_mean", build, aliases=("toy",), replace=True)
     assert "toy_mean" in studies.problem_names() and "velocity" in studies.problem_names()
-    p = studies.problem("toy", noise_px=0.3, duration=2.0, rate_hz=None)
+    with pytest.warns(FutureWarning, match="'toy' is deprecated: it is now 'toy_mean'"):
+        p = studies.problem("toy", noise_px=0.3, duration=2.0, rate_hz=None)
     assert p.noise == 0.3 and p.samples.shape == (64,)
+    # the point-depth problem's name before version 0.4, read with the same warning
+    with pytest.warns(FutureWarning, match="now 'point_depth'"):
+        assert studies.registered("point-depth") is studies.registered("point_depth")
     with pytest.raises(ValueError, match="takes no --rate"):
         studies.problem("toy_mean", rate_hz=10.0)
     with pytest.raises(ValueError, match="registered already"):

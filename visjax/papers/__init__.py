@@ -16,7 +16,7 @@ Beyond the three papers:
 
 - `spica`: Spica, Robuffo Giordano, Chaumette, *Active Structure from Motion: Application
   to Point, Sphere, and Cylinder* (the observer of the depth of static points). Problem:
-  `point-depth` (`spica.PointDepthProblem`, `spica.point_depth_problem`; variants
+  `point_depth` (`spica.PointDepthProblem`, `spica.point_depth_problem`; variants
   `planar` and `spherical`).
 - `hamel`: Hamel, Mahony, Trumpf, Morin, Hua, *Homography estimation on the Special Linear
   group based on direct point correspondence* (the observer on SL(3)). Problem:
@@ -83,9 +83,10 @@ _studies.register_problem(
     replace=True,
 )
 _studies.register_problem(
-    "point-depth",
+    "point_depth",
     spica.point_depth_problem,
     variants=("planar", "spherical"),
+    aliases=("point-depth",),  # its name before version 0.4
     summary="depth of static points, moving camera with known velocity (Spica et al.)",
     replace=True,
 )

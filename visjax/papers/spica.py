@@ -260,7 +260,7 @@ class InverseDepthModel(AbstractEKFModel):
 
 
 # ---------------------------------------------------------------------------------------
-# The problem `point-depth`: the inverse depth of static points seen by a camera moving with
+# The problem `point_depth`: the inverse depth of static points seen by a camera moving with
 # a known velocity (scene of its own: not the paper's motion)
 
 POINTS = (
@@ -564,7 +564,7 @@ def point_depth_problem(
     window_s: float = 0.25,
     robust: bool = False,
 ) -> PointDepthProblem:
-    """The `point-depth` problem on `point_depth_scene(duration, rate_hz)` with Gaussian
+    """The `point_depth` problem on `point_depth_scene(duration, rate_hz)` with Gaussian
     pixel noise `noise_px`; `variant` (`--set`) the projection, `"planar"` (default) or
     `"spherical"`; `window_s` the least-squares baseline's window (s); `robust`: the
     baselines' robust settings (`PointDepthProblem`)."""

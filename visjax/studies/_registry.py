@@ -17,6 +17,7 @@ import re
 import sys
 import types
 import typing
+import warnings
 from collections.abc import Callable, Sequence
 
 from ..estimators import MAX_STEPS
@@ -198,7 +199,7 @@ def register_problem(
     `build(**options) -> AbstractProblem`, called with the options the user gives (any of
     `data`, `noise_px`, `duration`, `rate_hz`, `variant`); the options it does not accept
     are refused with a clear error. A name already taken is an error unless `replace`."""
-    # a command-line word: letters, digits, `_` and `-` (`point-depth`), starting with a
+    # a command-line word: letters, digits, `_` and `-` (`point_depth`), starting with a
     # letter (not an option's `-`)
     if not (isinstance(name, str) and _NAME.fullmatch(name)):
         raise ValueError(
@@ -275,7 +276,13 @@ def registered(name: str) -> Registered:
     """The registry entry of `name` (or of an alias). **Raises:** `ValueError` listing the
     registered names, or saying why an installed plugin of that name failed to load."""
     _load()
-    name = _ALIASES.get(name, name)
+    if name in _ALIASES:
+        warnings.warn(
+            f"the problem name {name!r} is deprecated: it is now {_ALIASES[name]!r}",
+            FutureWarning,
+            stacklevel=1,  # one place: said once per process and name (the default filter)
+        )
+        name = _ALIASES[name]
     _resolve(name)
     if name in _BROKEN:
         raise ValueError(_BROKEN[name])
