@@ -63,6 +63,7 @@ from pathlib import Path
 
 import numpy as np
 import numpy.lib.format as npy_format
+import pandas as pd
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 300.0
@@ -993,7 +994,7 @@ PROBES += [
     Probe(
         "out_user_files_survive_a_run",
         "out_user_files",
-        command_probe(_with_user_files("v"), check=_wrote("summary.json", "estimate.npz")),
+        command_probe(_with_user_files("v"), check=_wrote("summary.json", "estimates.parquet")),
         mistake=False,
     ),
     Probe(
@@ -1021,13 +1022,13 @@ def _named_like_output(make):
 
 
 def _user_folder_estimate(out):
-    (out / "estimate.npz").mkdir()
-    (out / "estimate.npz" / "mine.txt").write_text("a folder of mine\n")
+    (out / "estimates.parquet").mkdir()
+    (out / "estimates.parquet" / "mine.txt").write_text("a folder of mine\n")
 
 
 PROBES += [
     Probe(
-        "out_user_subfolder_named_estimate_npz",
+        "out_user_subfolder_named_estimates_parquet",
         "out_user_files",
         command_probe(_named_like_output(_user_folder_estimate)),
         mistake=False,
@@ -1069,18 +1070,16 @@ def _other_command(second, *, force=False):
         def check(f, rc, out, err):
             now = f / "out" / "summary.json"
             if force:
-                kind = json.loads(now.read_text()).get("kind") if now.exists() else None
-                bad = [] if kind == "structure_data" else [f"the summary is {kind}'s"]
-                if (f / "out" / "velocity.png").exists():
-                    bad.append("velocity's velocity.png left beside the new results")
-                with np.load(f / "out" / "estimate.npz") as estimate:
-                    if "v_hat" in estimate.files:  # velocity's, not structure's
-                        bad.append("velocity's estimate.npz left beside the new results")
+                title = json.loads(now.read_text()).get("problem", "") if now.exists() else ""
+                bad = [] if title.startswith("moving point") else [f"the summary is {title}'s"]
+                table = f / "out" / "estimates.parquet"
+                if table.exists() and "v_hat[0]" in pd.read_parquet(table).columns:
+                    bad.append("velocity's estimates.parquet left beside the new results")
                 return bad if rc == 0 else [f"--force run failed: exit {rc}"]
             if not now.exists() or now.read_bytes() != first:
                 return ["velocity's summary.json was replaced or deleted"]
-            if not (f / "out" / "estimate.npz").exists():
-                return ["velocity's estimate.npz was deleted"]
+            if not (f / "out" / "estimates.parquet").exists():
+                return ["velocity's estimates.parquet was deleted"]
             return []
 
         return command_probe(lambda f: second, check=check)(folder)
@@ -1178,12 +1177,13 @@ def _concurrent(first_argv, second_argv):
             if gone:
                 problems.append(f"the manifest names entries that are missing: {gone}")
             summary = json.loads((folder / "out" / "summary.json").read_text())
-            kinds = {"velocity": "velocity_data", "moving_point": "structure_data"}
-            if kinds.get(record["command"]) != summary.get("kind"):
+            titles = {"velocity": "velocity", "moving_point": "moving point"}
+            if not summary.get("problem", "").startswith(titles.get(record["command"], "?")):
                 problems.append(
-                    f"mixed: the manifest is {record['command']}'s, the summary {summary['kind']}"
+                    f"mixed: the manifest is {record['command']}'s, the summary "
+                    f"{summary.get('problem')}'s"
                 )
-            stray = {"estimate.npz", "velocity.png", "structure.png"} - set(record["entries"])
+            stray = {"estimates.parquet", "run.png"} - set(record["entries"])
             stray = [n for n in stray if (folder / "out" / n).exists()]
             if stray:
                 problems.append(f"mixed: {stray} in out/ but not in its manifest")
@@ -1609,8 +1609,7 @@ def _ran_from_zero(folder, rc, out, err):
     """Valid times near the uint64 limit: the run goes through, its times from 0 s."""
     if rc != 0:
         return [f"exit {rc}"]
-    with np.load(folder / "out" / "estimate.npz") as f:
-        t = f["t"]
+    t = pd.read_parquet(folder / "out" / "estimates.parquet")["t"].to_numpy()
     return [] if abs(t[0]) < 1e-9 and abs(t[-1] - 0.499) < 1e-6 else [f"times {t[0]} to {t[-1]}"]
 
 

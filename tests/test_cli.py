@@ -296,48 +296,58 @@ def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch)
     locked.chmod(0o755)
 
 
+def _estimates(folder, name, size):
+    """The columns `name[0]` ... `name[size-1]` of a `run`'s `estimates.parquet`."""
+    table = pd.read_parquet(Path(folder) / "estimates.parquet")
+    return table["t"].to_numpy(), table[[f"{name}[{i}]" for i in range(size)]].to_numpy()
+
+
 @pytest.mark.slow
 def test_a_slow_file_gives_one_estimate_by_every_route(tmp_path, capsys):
     """A velocity file sampled at 50 Hz, slower than eq. (63)'s Euler bound: `visjax
-    velocity --data` and `visjax run velocity --data` integrate it with the same held step
-    (`run`'s `dt="auto"` rule, chosen by the problem at its default gains) and give the
-    same estimate (to rounding); neither reports `unstable_step`."""
+    velocity --data` and `visjax run velocity --data` are one route (the problem, its step
+    chosen by `run`'s `dt="auto"` rule at its default gains) and give the same estimate;
+    neither reports `unstable_step`. With `--filter-hz` the estimate is the unfiltered one
+    through `estimators.lowpass` (an independent call on the saved outputs)."""
     import dataclasses
 
     from tests.example_data import velocity_example
     from visjax import io
+    from visjax.estimators import lowpass, lowpass_delay
 
     data = velocity_example(duration=1.0, noise_px=0.0, dropout=0.0)
     fields = {f.name: getattr(data, f.name) for f in dataclasses.fields(data)}
     for name in ("t", "pixels", "velocity"):
         fields[name] = np.asarray(fields[name])[::20]  # 50 Hz
     path = io.VelocityData(**fields).save(tmp_path / "slow.npz")
-    old, new = tmp_path / "velocity", tmp_path / "run"
+    old, new, low = tmp_path / "velocity", tmp_path / "run", tmp_path / "low"
     codes = [
         main(["velocity", "--data", str(path), "--quiet", "--out", str(old)]),
         main(["run", "velocity", "--data", str(path), "--quiet", "--out", str(new)]),
+        main(["velocity", "--data", str(path), "--quiet", "--out", str(low), "--filter-hz", "2"]),
     ]
     capsys.readouterr()
-    assert {_summary(old)["result"], _summary(new)["result"]} <= {
-        "successful",
-        "worse_than_trivial",
-    }, codes
-    step = _summary(old)["integration_step_s"]
+    for folder in (old, new):
+        assert _summary(folder)["result"] in ("successful", "worse_than_trivial"), codes
+    step = _summary(old)["problem_settings"]["integration_step_s"]
     assert 0 < step < 0.02 / 2  # a held step, half the bound at most
     assert _summary(new)["problem_settings"]["integration_step_s"] == step
-    a = np.load(old / "estimate.npz")
-    b = pd.read_parquet(new / "estimates.parquet")
-    np.testing.assert_array_equal(b["t"].to_numpy(), a["t"])
-    v_hat = b[[f"v_hat[{i}]" for i in range(6)]].to_numpy()
-    np.testing.assert_allclose(v_hat, a["v_hat"], rtol=0, atol=1e-12)
+    t, v_hat = _estimates(old, "v_hat", 6)
+    t_new, v_new = _estimates(new, "v_hat", 6)
+    np.testing.assert_array_equal(t_new, t)
+    np.testing.assert_array_equal(v_new, v_hat)
+    t_low, v_low = _estimates(low, "v_hat", 6)
+    np.testing.assert_array_equal(t_low, t)
+    np.testing.assert_allclose(v_low, np.asarray(lowpass(t, v_hat, 2.0)), rtol=0, atol=1e-12)
+    settings = _summary(low)["problem_settings"]
+    assert settings["filter_hz"] == 2.0 and settings["filter_delay_s"] == lowpass_delay(2.0)
 
 
 @pytest.mark.slow
 def test_velocity_on_a_data_file(tmp_path, capsys):
-    """`visjax velocity --data FILE` on the example scene (not the paper's): the recovered
-    z1* and, since the file has the truth, `rms_last_half`; a bad file is one line."""
-    import numpy as np
-
+    """`visjax velocity --data FILE` (`visjax run velocity --data FILE`) on the example
+    scene (not the paper's): the recovered z1* and, since the file has the truth, the RMS
+    over the second half; a bad file is one line."""
     from tests.example_data import velocity_example
 
     data = velocity_example(duration=1.0, noise_px=0.0)  # 2% of the features missing
@@ -346,11 +356,13 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
     assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 0
     summary = _summary(out)
     z1_true = 1.5 + (data.R_star @ data.s1)[2]  # the plate starts at x0 = [0.05, -0.03, 1.5]
-    assert abs(summary["z1_star"] - z1_true) < 1e-9
-    assert len(summary["rms_last_half"]) == 6
-    assert max(summary["rms_last_half"]) < 0.05  # noise-free, 0.5-1 s: converging
-    est = np.load(out / "estimate.npz")
-    assert est["v_hat"].shape == (1000, 6) and est["v_object"].shape == (1000, 6)
+    assert abs(summary["problem_settings"]["z1_star"] - z1_true) < 1e-9
+    window = summary["problem_settings"]["window_s"]  # the second half (a float32 file)
+    np.testing.assert_allclose(window, [0.4995, 0.999], rtol=1e-6)
+    rms = summary["metrics"]["rms"]
+    assert len(rms) == 6 and max(rms) < 0.05  # noise-free, 0.5-1 s: converging
+    t, v_hat = _estimates(out, "v_hat", 6)
+    assert v_hat.shape == (1000, 6) and t[0] == 0.0
     quality = summary["quality"]  # against zero velocity over the same window
     assert quality["flag"] == "ok" and quality["ratio_to_trivial"] < 0.5, quality
     # the same frames with 0.1 px of noise: the sign-based law amplifies it past what
@@ -367,7 +379,7 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
     data.save(tmp_path / "v2.npz")
     capsys.readouterr()
     assert main(["velocity", "--data", str(tmp_path / "v2.npz"), "--quiet"]) == 0
-    assert "RMS" not in capsys.readouterr().out
+    assert "rms" not in capsys.readouterr().out
     bad = dict(np.load(path))
     del bad["A"]
     np.savez(tmp_path / "bad.npz", **bad)
@@ -379,34 +391,33 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_structure_and_euclidean_on_data_files(tmp_path, capsys):
-    """`visjax structure|euclidean --data FILE` on the example scenes (not the papers'):
-    gains designed / derived from the file alone, errors reported against its truth."""
-    import numpy as np
-
+def test_moving_and_static_points_on_data_files(tmp_path, capsys):
+    """`visjax moving_point|static_points --data FILE` (`visjax run PROBLEM --data`) on the
+    example scenes (not the papers'): gains designed / derived from the file alone, errors
+    reported against its truth; `euclidean`, the old name, still works."""
     from tests.example_data import euclidean_example, structure_example
 
     path = structure_example(duration=6.0, noise_px=0.0).save(tmp_path / "s.npz")
     out = tmp_path / "s"
     assert main(["moving_point", "--data", str(path), "--quiet", "--out", str(out)]) == 0
     summary = _summary(out)
-    assert summary["result"] == "successful" and len(summary["rms_last_half"]) == 3
-    # depth guess 4 m for a target 2.5 m away; 3-6 s: within 1 cm (4 mm measured)
-    assert max(summary["rms_last_half"]) < 0.01
-    assert (out / "estimate.npz").exists() and (out / "structure.png").exists()
+    assert summary["result"] == "successful" and len(summary["metrics"]["rms"]) == 3
+    # depth guess 4 m for a target 2.5 m away; 3-6 s: within 1 cm (2.5 mm measured)
+    assert summary["metrics"]["rms_worst"] < 0.01
+    assert (out / "estimates.parquet").exists() and (out / "run.png").exists()
 
     path = euclidean_example(duration=10.0, noise_px=0.0).save(tmp_path / "e.npz")
     out = tmp_path / "e"
     assert main(["euclidean", "--data", str(path), "--quiet", "--out", str(out)]) == 0
     summary = _summary(out)
-    assert summary["missing_observations"] > 0  # 2% of the features drop out
-    errors = np.asarray(summary["final_position_error_m"])
+    assert summary["dropped_fraction"] > 0  # 2% of the features drop out
+    errors = np.asarray(summary["metrics"]["error"])
     # 10 s of a 40 s convergence: from 0.1-0.5 m to a few cm, each at least halved
-    start = np.load(out / "estimate.npz")["features"][0]
+    table = pd.read_parquet(out / "estimates.parquet")
+    start = np.array([[table[f"omega_s[{i},{j}]"][0] for j in range(3)] for i in range(5)])
     initial = np.linalg.norm(start - np.load(path)["features"], axis=-1)
     assert len(errors) == 5 and errors.max() < 0.1 and np.all(errors < 0.5 * initial)
-    printed = capsys.readouterr().out
-    assert "feature 11: final position error" in printed
+    assert "error_worst" in capsys.readouterr().out
 
 
 @pytest.mark.slow

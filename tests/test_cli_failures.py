@@ -79,14 +79,17 @@ def test_a_jumping_tracker_is_refused_or_named(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 1
     printed = capsys.readouterr()
-    assert printed.err.startswith("visjax: error: velocity: the result is worse_than_trivial")
+    assert printed.err.startswith(
+        "visjax: error: run velocity: the result is worse_than_trivial"
+    ), printed.err
     assert printed.err.count("\n") == 1 and "None" not in printed.out
-    assert "result: worse_than_trivial" in printed.out
+    assert "estimator, worse_than_trivial" in printed.out
     summary = json.loads((out / "summary.json").read_text())
     io.validate_summary(summary)
+    assert summary["kind"] == "run"  # `visjax velocity --data` is `visjax run velocity --data`
     assert summary["result"] == "worse_than_trivial" and summary["quality"]["ratio_to_trivial"] > 10
     assert summary["dropped_fraction"] == 0.0
-    assert (out / "estimate.npz").exists() and (out / "velocity.png").exists()
+    assert (out / "estimates.parquet").exists() and (out / "run.png").exists()
 
 
 class _Stopped(eqx.Module):
@@ -261,7 +264,7 @@ def test_a_file_with_most_frames_missing_a_feature_is_not_successful(tmp_path, c
     assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 1
     printed = capsys.readouterr()
     assert printed.err.count("\n") == 1 and "too_many_dropped_frames" in printed.err
-    assert "75 of 100 (75.0%)" in printed.out
+    assert "75 of 100 (75.0%)" in printed.out and "run velocity" in printed.err
     summary = io.read_summary(out / "summary.json")
     assert summary["dropped_fraction"] == 0.75
     assert summary["result"] == "too_many_dropped_frames" != "successful"

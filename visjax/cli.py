@@ -12,10 +12,9 @@ import sys
 from pathlib import Path
 
 from . import report
-from .papers.chitrakaran import K_EQ63, RHO_EQ63  # the paper's gains live in its module
 
-K_DEFAULT, RHO_DEFAULT = (" ".join(f"{x:g}" for x in gain) for gain in (K_EQ63, RHO_EQ63))
 VERBS = ("run", "compare", "sweep", "tune")
+PAPER_COMMANDS = ("velocity", "moving_point", "static_points")  # with --data: `run PROBLEM`
 _OWN_DATA = "your own data file (.npz, see docs/your-own-data.md)"
 _OUT = "summary.json, the estimates and the figures"
 
@@ -98,10 +97,10 @@ def _grid_spec(text: str) -> str:
 
 
 def _set_name(text: str) -> str:
-    from .papers.jang import SETS
-
-    if text not in SETS:
-        raise argparse.ArgumentTypeError(f"unknown set {text!r}; choose from {', '.join(SETS)}")
+    """A set of Jang's thesis: a variant of the registered `moving_point` problem."""
+    sets = importlib.import_module("visjax.studies").registered("moving_point").variants
+    if text not in sets:
+        raise argparse.ArgumentTypeError(f"unknown set {text!r}; choose from {', '.join(sets)}")
     return text
 
 
@@ -181,8 +180,8 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("velocity", help="Chitrakaran et al.'s section 6, or your data")
     _arg(v, "--duration", _positive, 10.0, "seconds (default 10)")
     _arg(v, "--rate", _positive, 1000.0, "sample rate, Hz (default 1000)")
-    _arg(v, "--K", _six, _six(K_DEFAULT), f'diagonal of K (default "{K_DEFAULT}")')
-    _arg(v, "--rho", _six, _six(RHO_DEFAULT), f'diagonal of rho (default "{RHO_DEFAULT}")')
+    _arg(v, "--K", _six, None, "diagonal of K (default: the problem's, eq. (63))")
+    _arg(v, "--rho", _six, None, "diagonal of rho (default: the problem's, eq. (63))")
     _arg(v, "--filter-hz", _positive, None, "with --data: a causal 2nd-order low-pass")
     _common(v, _OUT, 0.0, _FIRST, _SEEDS, _OWN_DATA)
     _arg(v, "--max-hours", _positive, 24.0, _HOURS)
@@ -267,8 +266,12 @@ def _call(a):
 
     if a.command in (*VERBS, "merge"):
         fn = getattr(verbs, f"{a.command}_command")
-    elif getattr(a, "data", None) is not None:
-        fn = getattr(report, f"{a.command}_data_report")
+    elif getattr(a, "data", None) is not None:  # a paper's command on a file: `run PROBLEM`
+        options = {"filter_hz": getattr(a, "filter_hz", None)}
+        return verbs.run_command(
+            a.command, data=a.data, noise=0.0, seed=a.seed, out=a.out, quiet=a.quiet,
+            formats=a.format, options=options,
+        )  # fmt: skip
     else:
         fn = getattr(report, "reproduce" if a.command == "reproduce" else f"{a.command}_report")
     chosen, formats, path = (getattr(a, k, None) for k in ("set", "format", "data"))

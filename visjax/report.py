@@ -21,7 +21,7 @@ class RunFailed(RuntimeError):
     """A command's run did not succeed: its result code is not `successful` (a failed run,
     or a data file with too many frames missing). Raised after every file and the summary
     (which records the result code) are written; its message is one line, e.g.
-    `velocity: the run failed: diverged at sample 123 (t = 0.123 s)`. The command line
+    `run velocity: the run failed: diverged at sample 123`. The command line
     prints it as `visjax: error: ...`, keeps the files and exits with status 1."""
 
 
@@ -98,55 +98,6 @@ def velocity_report(
             write=write,
             max_hours=max_hours,
         ),
-    )
-
-
-def velocity_data_report(path, out=None, quiet=False, filter_hz=None, formats=("png",)) -> dict:
-    """The velocity estimator of Chitrakaran et al. on a user's `visjax.io.VelocityData`
-    file (`papers.velocity_file_reproduction`): `summary.json` (kind `velocity_data`),
-    `estimate.npz` and `velocity.<format>`. A run that fails, or a file whose frames miss a
-    feature in more than `visjax.io.MAX_DROPPED_FRACTION` of them, raises `RunFailed` once
-    they are written (the summary records the result code and `dropped_fraction`)."""
-    from .papers import velocity_file_reproduction
-
-    return _report(
-        "velocity_data",
-        dict(data=str(path), filter_hz=filter_hz),
-        out,
-        formats,
-        lambda write: velocity_file_reproduction(path, filter_hz, quiet=quiet, write=write),
-    )
-
-
-def moving_point_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
-    """The unknown input observer of Jang's thesis on a user's `visjax.io.MovingPointData`
-    file (`papers.moving_point_file_reproduction`): `summary.json` (kind
-    `structure_data`), `estimate.npz` and `structure.<format>`; `RunFailed` as
-    `velocity_data_report`."""
-    from .papers import moving_point_file_reproduction
-
-    return _report(
-        "structure_data",
-        dict(data=str(path)),
-        out,
-        formats,
-        lambda write: moving_point_file_reproduction(path, quiet=quiet, write=write),
-    )
-
-
-def static_points_data_report(path, out=None, quiet=False, formats=("png",)) -> dict:
-    """The adaptive structure estimator of Nath et al. on a user's
-    `visjax.io.StaticPointsData` file (`papers.static_points_file_reproduction`):
-    `summary.json` (kind `euclidean_data`), `estimate.npz` and `euclidean.<format>`;
-    `RunFailed` as `velocity_data_report`."""
-    from .papers import static_points_file_reproduction
-
-    return _report(
-        "euclidean_data",
-        dict(data=str(path)),
-        out,
-        formats,
-        lambda write: static_points_file_reproduction(path, quiet=quiet, write=write),
     )
 
 

@@ -64,33 +64,37 @@ def _settings(arguments: dict) -> dict:
 
 
 @functools.lru_cache(maxsize=16)
-def _built(name, data, stamp, noise, duration, rate, variant, robust=False):
+def _built(name, data, stamp, noise, duration, rate, variant, robust=False, options=()):
     """A problem, cached per process (a data file by its path and modification time): a
     `tune` after a `sweep` of the same problem reuses its set-up and compiled runs."""
     from .studies import registered
 
     return registered(name).make(
         data=data, noise_px=noise, duration=duration, rate_hz=rate, variant=variant,
-        robust=True if robust else None,
+        robust=True if robust else None, **dict(options),
     )  # fmt: skip
 
 
 def problems(
-    name, data=None, noise=0.1, duration=None, rate=None, variants=None, every=True, robust=False
-):
+    name, data=None, noise=0.1, duration=None, rate=None, variants=None, every=True, robust=False,
+    options=None,
+):  # fmt: skip
     """`[(tag, problem)]`: the registered problem `name` once (tag `None`), or, for a
     problem with named variants, once per variant (`variants`, default all of them when
     `every`, else the problem's default); `robust`: the problem's robust settings (its
-    builder's `robust=True`). **Raises:** `ValueError` for an unknown problem, variant or
-    option (a problem without robust settings takes no `--robust`)."""
+    builder's `robust=True`); `options`: more of its builder's keyword arguments (`None`
+    values left out). **Raises:** `ValueError` for an unknown problem, variant or option
+    (a problem without robust settings takes no `--robust`)."""
     from .studies import registered
 
     entry = registered(name)
     stamp = None if data is None else os.path.getmtime(data)
     data = None if data is None else str(data)
 
+    extra = tuple(sorted((k, v) for k, v in (options or {}).items() if v is not None))
+
     def build(variant):
-        return _built(entry.name, data, stamp, noise, duration, rate, variant, robust)
+        return _built(entry.name, data, stamp, noise, duration, rate, variant, robust, extra)
 
     entry.check(data, duration, rate, variants)
     if variants:
@@ -271,9 +275,11 @@ def run_command(
     out=None,
     quiet: bool = False,
     formats=("png",),
+    options=None,
 ) -> dict:
     """`visjax run PROBLEM`: one method (default the estimator) once, on the problem's
-    scene or data file with `noise` px of pixel noise (seed `seed`); prints its result and
+    scene or data file with `noise` px of pixel noise (seed `seed`; `options`: more of the
+    problem's builder's keyword arguments, e.g. `{"filter_hz": 5.0}`); prints its result and
     metrics; writes `summary.json` (kind `run`), `estimates.parquet` (the saved outputs
     over time, one column per component) and `run.<format>` (the problem's figure). A run
     that does not succeed (or one on a data file whose frames miss a feature in more than
@@ -291,8 +297,9 @@ def run_command(
     results, failures = {}, []
     dropped = _dropped(problem, data)
     for tag, p in problems(
-        problem, data, noise, duration, rate, variants, every=False, robust=robust
-    ):
+        problem, data, noise, duration, rate, variants, every=False, robust=robust,
+        options=options,
+    ):  # fmt: skip
         m = p.check_method(method)
         sol = jax.block_until_ready(solution(p, None, seed, method=m))
         code = result_names(sol.result)
@@ -331,7 +338,7 @@ def run_command(
         print(f"{head}{p.title}: {m}, {code}")
         if judged is not None:
             print(f"{head}  quality: {quality_line(judged)}")
-            if judged.get("innovation", {}).get("flag", "ok") != "ok":
+            if failure is None and judged.get("innovation", {}).get("flag", "ok") != "ok":
                 warn = innovation_line(judged["innovation"])
                 print(f"warning: run {problem}: {head}{warn}", file=sys.stderr)
         if dropped is not None:
@@ -396,8 +403,7 @@ def _dropped(problem, data) -> dict | None:
     data file or for a format of its own."""
     if data is None:
         return None
-    from .io import MAX_DROPPED_FRACTION
-    from .papers import DROPPED_RESULT, coverage_line, file_coverage
+    from .io import DROPPED_RESULT, MAX_DROPPED_FRACTION, coverage_line, file_coverage
     from .studies import registered
 
     cover = file_coverage(registered(problem).name, data)

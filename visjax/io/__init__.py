@@ -6,6 +6,8 @@ staged (atomic) output folders (`staged_output`); and the writing of a command's
 summary (`Outputs`, `write_outputs`, `command_summary`)."""
 
 from ._formats import (
+    DATA_FORMATS as DATA_FORMATS,
+    DROPPED_RESULT as DROPPED_RESULT,
     MAX_DATA_BYTES as MAX_DATA_BYTES,
     MAX_DROPPED_FRACTION as MAX_DROPPED_FRACTION,
     MAX_INTERVAL_S as MAX_INTERVAL_S,
@@ -19,6 +21,8 @@ from ._formats import (
     MovingPointData as MovingPointData,
     StaticPointsData as StaticPointsData,
     VelocityData as VelocityData,
+    coverage_line as coverage_line,
+    file_coverage as file_coverage,
     load_tracks_csv as load_tracks_csv,
     max_data_bytes as max_data_bytes,
     read_npz as read_npz,
@@ -27,6 +31,7 @@ from ._formats import (
 from ._outputs import (
     ARRAYS as ARRAYS,
     COMMON as COMMON,
+    READ_ONLY_KINDS as READ_ONLY_KINDS,
     SUMMARIES as SUMMARIES,
     TABLES as TABLES,
     finite_or_null as finite_or_null,

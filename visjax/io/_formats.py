@@ -894,3 +894,40 @@ def load_tracks_csv(path, n_features: int | None = None, time_unit: str | None =
     pixels = np.full((t.shape[0], n, 2), np.nan)
     pixels[k, idx] = uv
     return t, pixels
+
+
+DROPPED_RESULT = "too_many_dropped_frames"
+"""The result of a run that succeeded on a data file whose frames miss a feature in more than
+`MAX_DROPPED_FRACTION` of them: the estimate rests mostly on held or extrapolated frames
+(the name of `visjax.RESULTS`'s item)."""
+
+DATA_FORMATS = {
+    "velocity": VelocityData,
+    "moving_point": MovingPointData,
+    "static_points": StaticPointsData,
+}
+"""The data format of each registered problem that reads one of these formats, by the
+problem's name (a user's problem reads a format of its own)."""
+
+
+def coverage_line(fraction: float, frames: int) -> str:
+    """`frames with a feature missing or held: 1500 of 2000 (75.0%)`, and past
+    `MAX_DROPPED_FRACTION` what that makes of the result."""
+    missing = int(round(fraction * frames))
+    line = f"frames with a feature missing or held: {missing} of {frames} ({fraction:.1%})"
+    if fraction > MAX_DROPPED_FRACTION:
+        line += (
+            f", more than visjax.io.MAX_DROPPED_FRACTION ({MAX_DROPPED_FRACTION:.0%}): the "
+            "estimate rests mostly on held frames"
+        )
+    return line
+
+
+def file_coverage(problem: str, path) -> tuple[float, int] | None:
+    """`(dropped_fraction(), frames)` of a data file of the registered problem `problem`
+    (a name of `DATA_FORMATS`); `None` for another problem (its format is its own)."""
+    cls = DATA_FORMATS.get(problem)
+    if cls is None:
+        return None
+    data = cls.load(path)
+    return float(data.dropped_fraction()), int(np.shape(data.pixels)[0])

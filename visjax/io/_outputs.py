@@ -18,6 +18,7 @@ present only in some runs (the description says when).
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 COMMON = {
@@ -345,33 +346,15 @@ ARRAYS = {
         "(S, N, 6) with `--seeds` S",
         "velocity": "(N, 6) the true velocity",
     },
-    "velocity_data estimate.npz": {
-        "t": "(M,) the integration grid, s",
-        "v_hat": "(M, 6) the estimate in the camera frame",
-        "v_object": "(M, 6) the same in the object frame (Remark 6)",
-        "v_filtered?": "(M, 6) with `--filter-hz`: the low-passed estimate",
-    },
     "structure/estimate_<set>.npz": {
         "t": "(N,) s",
         "position": "(N, 3) the true point in the camera frame, m",
         "estimate": "(N, 3) the observer's estimate, m; (S, N, 3) with `--seeds` S",
     },
-    "structure_data estimate.npz": {
-        "t": "(N,) the frame times, s",
-        "position": "(N, 3) the estimate at the frames, m",
-        "x_hat": "(N, 3) the observer's state",
-    },
     "euclidean/estimate.npz": {
         "t": "(M,) s",
         "features": "(M, n, 3) the estimated unknown features, m; (S, M, n, 3) with `--seeds` S",
         "truth": "(n, 3) their true positions, m",
-    },
-    "euclidean_data estimate.npz": {
-        "t": "(M,) s",
-        "features": "(M, n - k, 3) the estimated features, m",
-        "A": "(M, 3, 3) the estimated intrinsics",
-        "R_c": "(M, 3, 3) the estimated camera mounting rotation",
-        "x_c": "(M, 3) the estimated camera mounting offset, m",
     },
 }
 
@@ -447,12 +430,31 @@ def write_summary(path, summary: dict) -> dict:
     return clean
 
 
+READ_ONLY_KINDS = {
+    "velocity_data": "velocity",
+    "structure_data": "moving_point",
+    "euclidean_data": "static_points",
+}
+"""Summary kinds that visjax 0.3 wrote and reads still (with a `FutureWarning`), by the
+problem whose `visjax PROBLEM --data FILE` wrote them: that command now writes kind `run`."""
+
+
 def read_summary(path):
     """A `summary.json` as a `pandas.Series` (nested objects as Python values), checked
-    against its schema."""
+    against its schema. A summary of a kind of `READ_ONLY_KINDS` is read with a
+    `FutureWarning`."""
     import pandas as pd
 
-    validate_summary(json.loads(Path(path).read_text()))
+    summary = validate_summary(json.loads(Path(path).read_text()))
+    problem = READ_ONLY_KINDS.get(summary["kind"])
+    if problem is not None:
+        warnings.warn(
+            f"{path}: summary kind {summary['kind']!r} was written by `visjax {problem} "
+            f"--data` of visjax 0.3; that command now writes kind 'run' (as `visjax run "
+            f"{problem} --data`)",
+            FutureWarning,
+            stacklevel=2,
+        )
     # precise_float: pandas' fast float parser rounds the last digits of what json wrote
     return pd.read_json(path, typ="series", precise_float=True)
 
@@ -462,7 +464,14 @@ def schema_markdown() -> str:
     lines = ["## Keys of every summary", "", "| key | type | meaning |", "|---|---|---|"]
     lines += [f"| `{k}` | `{t}` | {d} |" for k, (t, d) in COMMON.items()]
     for kind, keys in SUMMARIES.items():
-        lines += ["", f"## `{kind}`", "", "| key | type | meaning |", "|---|---|---|"]
+        lines += ["", f"## `{kind}`"]
+        if kind in READ_ONLY_KINDS:
+            lines += [
+                "",
+                f"Read only (with a `FutureWarning`): written by `visjax "
+                f"{READ_ONLY_KINDS[kind]} --data` of visjax 0.3, which now writes kind `run`.",
+            ]
+        lines += ["", "| key | type | meaning |", "|---|---|---|"]
         lines += [f"| `{k}` | `{t}` | {d} |" for k, (t, d) in keys.items()]
     lines += ["", "## Tables", ""]
     for name, cols in TABLES.items():

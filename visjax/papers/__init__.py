@@ -32,18 +32,6 @@ from . import (
     nath as nath,
     spica as spica,
 )
-from ._files import (
-    DROPPED_RESULT as DROPPED_RESULT,
-    FileEstimate as FileEstimate,
-    coverage_line as coverage_line,
-    file_coverage as file_coverage,
-    moving_point_file_reproduction as moving_point_file_reproduction,
-    moving_point_from_file as moving_point_from_file,
-    static_points_file_reproduction as static_points_file_reproduction,
-    static_points_from_file as static_points_from_file,
-    velocity_file_reproduction as velocity_file_reproduction,
-    velocity_from_file as velocity_from_file,
-)
 from ._moving_point import (
     MovingPointProblem as MovingPointProblem,
     moving_point_observer_for_data as moving_point_observer_for_data,

@@ -258,25 +258,19 @@ class MovingPointProblem(AbstractProblem):
         ]
 
     def figure(self, method, solution):
-        import matplotlib.pyplot as plt
+        """Like Figs. 5-7 and 5-8 of Jang's thesis (`plots.plot_structure`): the true and
+        the estimated position, and the error zoomed on the second half; the estimate
+        alone without a truth."""
+        from ..plots import plot_structure
 
-        t = np.asarray(solution.ts)
-        est = np.asarray(solution.outputs.position) * self.to_m
-        fig, axes = plt.subplots(3, 1, figsize=(8, 6), sharex=True)
-        for i, ax in enumerate(axes):
-            if self.truth is not None:
-                ax.plot(
-                    np.asarray(self.truth_ts),
-                    np.asarray(self.truth)[:, i] * self.to_m,
-                    "k",
-                    zorder=3,
-                )
-            ax.plot(t, est[:, i], lw=0.8)
-            ax.set_ylabel("XYZ"[i] + " (m)")
-        axes[-1].set_xlabel("t (s)")
-        fig.suptitle(f"{self.title}: {method} (black: truth)")
-        fig.tight_layout()
-        return fig
+        ts = solution.ts
+        truth = None if self.truth is None else held(self.truth_ts, self.truth, ts) * self.to_m
+        return plot_structure(
+            np.asarray(ts),
+            None if truth is None else np.asarray(truth),
+            np.asarray(solution.outputs.position) * self.to_m,
+            title=f"{self.title}: {method}",
+        )
 
 
 def moving_point_problem(
@@ -304,6 +298,7 @@ def moving_point_problem(
     `Kc_observer`: on a thesis set, the camera matrix the observer normalises the pixels
     with (default the thesis' refined least-squares one, which is also the simulated
     camera's: `jang.KC_REFINED`); a file carries its own."""
+    from ..estimators import integration_step, moving_point_stream
     from ..sim import sample_times
     from . import jang
 
@@ -320,7 +315,11 @@ def moving_point_problem(
         observer, u, _ = moving_point_observer_for_data(d)
         frame_ts = jnp.asarray(d.t, float)
         t0, t1 = float(frame_ts[0]), float(frame_ts[-1])
-        ts = t0 + sample_times(t1 - t0, 1000)
+        # `run`'s rule (`dt="auto"`, `integration_step`) with the thesis' 1 kHz law as the
+        # longest step: the frames held at that step, or the frames themselves if faster
+        frames = moving_point_stream(frame_ts, d.pixels, u, d.A, dropped="extrapolate", throw=False)
+        dt = integration_step(frames, observer, max_step=1e-3)
+        ts = frame_ts if dt is None else t0 + sample_times(t1 - t0, 1.0 / dt)
         index = np.clip(
             np.searchsorted(np.asarray(frame_ts), np.asarray(ts) + 1e-9, side="right") - 1,
             0,

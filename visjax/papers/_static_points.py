@@ -253,21 +253,16 @@ class StaticPointsProblem(AbstractProblem):
         }
 
     def figure(self, method, solution):
-        import matplotlib.pyplot as plt
+        """Each unknown feature's estimated position and, with the truth, its error
+        (`plots.plot_feature_estimates`), as Nath et al. show the structure's convergence."""
+        from ..plots import plot_feature_estimates
 
-        t = np.asarray(solution.ts)
-        est = np.asarray(solution.outputs.omega_s)
-        fig, axes = plt.subplots(3, 1, figsize=(8, 6), sharex=True)
-        for i, ax in enumerate(axes):
-            ax.plot(t, est[:, :, i], lw=0.8)
-            if self.truth is not None:
-                for v in np.asarray(self.truth)[:, i]:
-                    ax.axhline(v, color="k", lw=0.6, ls="--")
-            ax.set_ylabel("xyz"[i] + " (m)")
-        axes[-1].set_xlabel("t (s)")
-        fig.suptitle(f"{self.title}: {method} (dashed: truth)")
-        fig.tight_layout()
-        return fig
+        return plot_feature_estimates(
+            np.asarray(solution.ts),
+            np.asarray(solution.outputs.omega_s),
+            None if self.truth is None else np.asarray(self.truth),
+            title=f"{self.title}: {method}",
+        )
 
 
 def static_points_problem(

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._util import Frozen, Note, number_text
-from ..estimators import AbstractAdjoint, DirectAdjoint
+from ..estimators import AbstractAdjoint, DirectAdjoint, lowpass, lowpass_delay
 from ..studies import AbstractProblem, Parameter, as_default, held, noise_parameter
 
 # the robust settings (a stated choice, not tuned to any result; those of the static-points
@@ -51,11 +51,11 @@ class VelocityProblem(AbstractProblem):
     Parameters: `K` and `rho` (the gains of eq. (40), diagonal, 6 each; default eq. (63)
     or the data file's), and `K_scale`, `rho_scale`, multipliers of them (default 1).
     Metrics: `rms` (6,), the RMS error per degree of freedom over the paper's window (5-10
-    s; the second half of a shorter run), and `rms_worst`, its largest component (m/s and
-    rad/s mixed, as in the paper's Table I). Uncertainty (`uncertainty`): `rms_std` (6,),
-    the RMS over the same window of the fits' predicted standard deviation of the velocity
-    (`baselines.SmootherDiagnostics.cov`: the pixel noise's share of `rms`, not the fit's
-    lag); NaN for the estimator and the EKF.
+    s; the second half of a shorter run, and of a data file), and `rms_worst`, its largest
+    component (m/s and rad/s mixed, as in the paper's Table I). Uncertainty
+    (`uncertainty`): `rms_std` (6,), the RMS over the same window of the fits' predicted
+    standard deviation of the velocity (`baselines.SmootherDiagnostics.cov`: the pixel
+    noise's share of `rms`, not the fit's lag); NaN for the estimator and the EKF.
 
     `robust` (the command line's `--robust`): the baselines' robust settings for pixel
     tracks with outliers: the fits' per-frame poses minimise the Cauchy loss of each
@@ -97,12 +97,14 @@ class VelocityProblem(AbstractProblem):
     constants: str = eqx.field(static=True, default="calibration")
     adjoint: AbstractAdjoint = DirectAdjoint()
     robust: bool = eqx.field(default=False, static=True)
+    filter_hz: float | None = eqx.field(static=True, default=None)  # the estimate's low-pass
 
     @property
     def title(self) -> str:
         noise = number_text(self.noise_px)
         robust = ", robust baselines" if self.robust else ""
-        return f"velocity (Chitrakaran et al.), {self.source}, {noise} px noise{robust}"
+        low = "" if self.filter_hz is None else f", low-passed at {self.filter_hz:g} Hz"
+        return f"velocity (Chitrakaran et al.), {self.source}, {noise} px noise{robust}{low}"
 
     @property
     def scored(self) -> bool:
@@ -142,18 +144,20 @@ class VelocityProblem(AbstractProblem):
         pixels = inputs["pixels"]
         if method == "estimator":
             stream, est = self._estimator(params, pixels)
-            reducer = None if self.truth is None else self._window()
+            low = self.filter_hz is not None  # scored from the saved, low-passed outputs
+            reducer = None if self.truth is None or low else self._window()
             # a held step saves about once per sample interval (not every step)
             every = 1 if self.dt is None else max(1, round(self.interval / self.dt))
-            return run(
+            sol = run(
                 est,
                 stream,
                 dt=self.dt,
-                saveat=SaveAt(every=every, outputs=outputs, diagnostics=outputs),
+                saveat=SaveAt(every=every, outputs=outputs or low, diagnostics=outputs),
                 reducer=reducer,
                 adjoint=self.adjoint,
                 throw=False,
             )
+            return sol if not low else self._lowpassed(sol)
         if method in ("batch", "batch_window"):
             return self._fit(pixels, causal=method == "batch_window")
         if method == "ekf":
@@ -170,6 +174,18 @@ class VelocityProblem(AbstractProblem):
                 throw=False,
             )
         raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
+
+    def _lowpassed(self, sol):
+        """The estimate (`v_hat` and `v_object`) through `estimators.lowpass` at
+        `filter_hz` (causal, 2nd order; its delay `lowpass_delay(filter_hz)`)."""
+        return eqx.tree_at(
+            lambda s: (s.outputs.v_hat, s.outputs.v_object),
+            sol,
+            tuple(
+                lowpass(sol.ts, x, self.filter_hz)
+                for x in (sol.outputs.v_hat, sol.outputs.v_object)
+            ),
+        )
 
     def _estimator(self, params, pixels):
         """The estimator's stream of one draw's `pixels` and the estimator at `params`
@@ -266,9 +282,9 @@ class VelocityProblem(AbstractProblem):
     def metrics(self, method, solution):
         if self.truth is None:
             return {}
-        if method == "estimator":
+        if method == "estimator" and solution.summary is not None:
             rms = solution.summary.rms
-        else:
+        else:  # a baseline, or the low-passed estimate (`filter_hz`): from the outputs
             truth = held(self.ts, self.truth, solution.ts)
             rms = self._window().over(solution.ts, solution.outputs, truth).rms
         return {"rms_worst": jnp.max(rms), "rms": rms}
@@ -353,24 +369,24 @@ class VelocityProblem(AbstractProblem):
             "latency": "batch: one fit over all frames per call; others: per sample",
             "chunk": self.chunk,
             "integration_step_s": self.dt,
+            "filter_hz": self.filter_hz,
+            "filter_delay_s": None if self.filter_hz is None else lowpass_delay(self.filter_hz),
         }
 
     def figure(self, method, solution):
-        import matplotlib.pyplot as plt
+        """Like Fig. 2 of Chitrakaran et al. (`plots.plot_velocity`): per degree of freedom
+        the truth and the estimate, and their difference; the estimate alone without a
+        truth."""
+        from ..plots import plot_velocity
 
-        from .chitrakaran import DOF_NAMES
-
-        t = np.asarray(solution.ts)
-        est = np.asarray(solution.outputs.v_hat)
-        fig, axes = plt.subplots(2, 3, figsize=(11, 5), sharex=True)
-        for i, ax in enumerate(axes.ravel()):
-            if self.truth is not None:
-                ax.plot(np.asarray(self.ts), np.asarray(self.truth)[:, i], "k", lw=1, zorder=3)
-            ax.plot(t, est[:, i], lw=0.8)
-            ax.set_title(DOF_NAMES[i])
-        fig.suptitle(f"{self.title}: {method} (black: truth)")
-        fig.tight_layout()
-        return fig
+        ts = solution.ts
+        truth = None if self.truth is None else held(self.ts, self.truth, ts)
+        return plot_velocity(
+            np.asarray(ts),
+            None if truth is None else np.asarray(truth),
+            np.asarray(solution.outputs.v_hat),
+            title=f"{self.title}: {method}",
+        )
 
 
 def velocity_problem(
@@ -384,11 +400,13 @@ def velocity_problem(
     adjoint: AbstractAdjoint | None = None,
     constants: str = "calibration",
     robust: bool = False,
+    filter_hz: float | None = None,
 ) -> VelocityProblem:
     """The `velocity` problem (`VelocityProblem`) on the section-6 simulation of
     Chitrakaran et al. (`duration` at `rate_hz`, gains of eq. (63)) or on a
     `visjax.io.VelocityData` file (its gains, eq. (63) if none), with `noise_px` of pixel
-    noise per seed.
+    noise per seed. Scored over the paper's window (5-10 s, the second half of a shorter
+    run) for its simulation and over the second half of a file.
 
     Stated settings: the EKF assumes the pixel noise `max(noise_px, 0.05)` and the largest
     jerk `max_jerk` (default 0.2 m/s^3 and rad/s^3 for the paper's scenario, whose velocity
@@ -402,7 +420,9 @@ def velocity_problem(
     (the paper's premise, section 5): in the simulation the distance between features 1
     and 3 (the square's diagonal), in a file its `length` (if it has none, from the
     object frame's origin, `depth_from_known_length`). `robust`: the baselines' robust
-    settings (`VelocityProblem`).
+    settings (`VelocityProblem`). `filter_hz`: the estimator's estimate through a causal
+    2nd-order low-pass at this cutoff (`estimators.lowpass`) before it is scored and saved
+    (`visjax velocity --data FILE --filter-hz F`); its delay is `lowpass_delay(filter_hz)`.
     """
     from ..estimators import VelocityEstimator, fixed_camera, integration_step, velocity_stream
     from .chitrakaran import K_EQ63, RHO_EQ63, section6_scenario, window
@@ -411,6 +431,8 @@ def velocity_problem(
         raise ValueError(f"`chunk` must be a positive int (frames per chunk); got {chunk!r}.")
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
+    if filter_hz is not None and not (np.isfinite(filter_hz) and filter_hz > 0):
+        raise ValueError(f"`filter_hz` must be a positive number of Hz; got {filter_hz!r}.")
     if constants not in ("calibration", "per_draw"):
         raise ValueError(f'`constants` must be "calibration" or "per_draw"; got {constants!r}.')
     if data is None:
@@ -449,6 +471,7 @@ def velocity_problem(
     stream = velocity_stream(ts, clean, camera, dropped="hold" if dropouts else "stop", throw=False)
     dt = integration_step(stream, VelocityEstimator(K=K, rho=rho))
     jerk = (0.2 if data is None else 1.0) if max_jerk is None else float(max_jerk)
+    span = float(ts[-1]) - float(ts[0])
     return VelocityProblem(
         ts=ts,
         clean=jnp.asarray(clean, float),
@@ -462,7 +485,7 @@ def velocity_problem(
         z1_star=z1_star,
         reference_pixels=p_ref,
         noise_px=jnp.asarray(float(noise_px)),
-        window=window(float(ts[-1]) - float(ts[0])),
+        window=window(span) if data is None else (span / 2, span),
         bandwidths=tuple(velocity_observer_bandwidth_hz(K)),
         max_jerk=jerk,
         dropouts=dropouts,
@@ -475,6 +498,7 @@ def velocity_problem(
         constants=constants,
         adjoint=DirectAdjoint() if adjoint is None else adjoint,
         robust=bool(robust),
+        filter_hz=None if filter_hz is None else float(filter_hz),
     )
 
 
