@@ -29,31 +29,32 @@ def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatc
     `--quick` run is a slow test of `tests/test_outputs.py`): every job runs, every output
     follows its schema, and the table has one number per row. Its figures as SVG (a quarter
     of the time of 300-dpi PNGs; the commands' own tests below write PNGs)."""
+    import dataclasses
     import functools
 
-    from visjax import report
+    from visjax.studies import _reproductions, registered_reproduction
 
     small = {
-        "geometry_scenes": (5, 5),
-        "structure_duration_s": (2.0, 2.0),
-        "euclidean_duration_s": (2.0, 2.0),
-        "testbed_sets": (["I.1"], ["I.1"]),
-        "testbed_duration_s": (TESTBED_S, TESTBED_S),
-        "testbed_studies": (False, False),
+        "velocity": dict(duration=1.0),
+        "geometry": dict(scenes=5),
+        "moving_point": dict(duration=2.0, sets=["I.1", "II.2"]),
+        "static_points": dict(duration=2.0),
+        "testbed": dict(sets=["I.1"], duration=TESTBED_S, studies=False),
+        "point_depth": dict(duration=2.0),  # the settings of tests/papers/test_spica.py
+        "homography": dict(seeds=1, duration=0.2),
     }
-    monkeypatch.setattr(report, "QUICK", small)
-    monkeypatch.setattr(
-        report, "velocity_report", functools.partial(report.velocity_report, duration=1.0)
-    )
-    monkeypatch.setattr(
-        report, "moving_point_report",
-        functools.partial(report.moving_point_report, sets=["I.1", "II.2"]),
-    )  # fmt: skip
+    for name, options in small.items():
+        entry = registered_reproduction(name)
+        run = functools.partial(entry.run, **options)
+        monkeypatch.setitem(
+            _reproductions._REPRODUCTIONS, name, dataclasses.replace(entry, run=run)
+        )
     out = tmp_path / "results"
     assert main(["reproduce", "--quick", "--quiet", "--format", "svg", "--out", str(out)]) == 0
     kinds = check_outputs(out)
     assert sorted(kinds.values()) == sorted(
         ["reproduce", "velocity", "geometry", "structure", "euclidean", "testbed"]
+        + ["point_depth", "homography"]
     )
     # the settings name the folder the user asked for, not the staging folder written first
     assert read_summary(out / "summary.json")["settings"]["out"] == str(out)
@@ -61,11 +62,14 @@ def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatc
     assert table["value"].dtype == np.float64 and len(table) >= 6
     # the reference is a number, its kind in its own column
     assert table["reference"].dtype == np.float64 and table["reference"].notna().all()
-    assert set(table["reference_kind"]) <= {"published", "truth", "bound", "OpenCV"}
-    assert table.loc[table["what"].str.contains("z1"), "reference_kind"].tolist() == ["truth"]
+    assert list(table.columns) == ["name", "value", "reference", "reference_kind", "unit"]
+    assert set(table["reference_kind"]) == {"published", "truth", "bound", "OpenCV", "ideal"} | {
+        "trivial"
+    }
+    assert table.loc[table["name"].str.contains("z1"), "reference_kind"].tolist() == ["truth"]
     assert "summary" in capsys.readouterr().out
     figures = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.svg"))
-    assert len(figures) == 8 and not list(out.rglob("*.png")), figures
+    assert len(figures) == 10 and not list(out.rglob("*.png")), figures
 
 
 def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
@@ -137,13 +141,16 @@ def test_out_that_is_a_file_is_refused_before_any_work(capsys, tmp_path):
 
 
 def test_a_failing_command_leaves_nothing_behind(tmp_path, monkeypatch, capsys):
-    from visjax import report
+    import dataclasses
 
-    def half_written(*args, out=None, **kwargs):
+    from visjax.studies import _reproductions, registered_reproduction
+
+    def half_written(out=None, **kwargs):
         (Path(out) / "summary.json").write_text("{}")
         raise RuntimeError("the simulation failed")
 
-    monkeypatch.setattr(report, "static_points_report", half_written)
+    entry = dataclasses.replace(registered_reproduction("static_points"), run=half_written)
+    monkeypatch.setitem(_reproductions._REPRODUCTIONS, "static_points", entry)
     out = tmp_path / "out"
     assert main(["euclidean", "--out", str(out)]) == 1
     err = capsys.readouterr().err
@@ -261,9 +268,8 @@ def test_one_option_vocabulary_and_version(capsys):
         a for a in parser._subparsers._group_actions[0].choices["reproduce"]._actions
         if a.dest == "quick"
     )  # fmt: skip
-    assert "geometry scenes 100 -> 20" in quick.help and "velocity simulation runs in full" in (
-        quick.help
-    )
+    assert "geometry: 20 scenes, not 100" in quick.help and "velocity: in full" in quick.help
+    assert "point_depth: 1.5 s" in quick.help and "homography: 2 seeds" in quick.help
     assert "seed 0" not in parser.format_help()
 
 

@@ -72,6 +72,12 @@ def test_the_page_runs_from_the_command_line(module_dir, monkeypatch, capsys):
     assert np.isfinite(med["estimator"]) and med["estimator"] > 0
     assert "held-out" in capsys.readouterr().out
 
+    # the page's reproduction, registered by the same module: its row, checked; central
+    # differences at 0.5 px carry 0.5 / (sqrt(2) 0.01 s) = 35.4 px/s per axis
+    (row,) = studies.registered_reproduction("pixel_velocity").rows(None, quick=True)
+    assert row["reference_kind"] == "trivial" and row["unit"] == "px/s"
+    assert 33.0 < row["reference"] < 42.0 and 0 < row["value"] < row["reference"], row
+
 
 @pytest.mark.slow
 def test_the_page_runs_as_a_script(module_dir):

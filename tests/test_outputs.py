@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from tests.helpers import check_outputs
-from visjax import __version__
+from visjax import __version__, studies
 from visjax.cli import main
 from visjax.io import (
     COMMON,
@@ -42,6 +42,8 @@ def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
         "structure/summary.json": "structure",
         "euclidean/summary.json": "euclidean",
         "testbed/summary.json": "testbed",
+        "point_depth/summary.json": "point_depth",
+        "homography/summary.json": "homography",
     }
     # every figure in both formats asked for
     pngs = {p.with_suffix("") for p in results.rglob("*.png")}
@@ -58,11 +60,11 @@ def test_the_reproduce_table_holds_numbers(results):
     top = json.loads((results / "summary.json").read_text())
     assert top["quick"] is True and top["settings"]["quick"] is True
     for row in top["rows"]:
-        assert set(row) == {"what", "value", "unit", "reference", "reference_kind"}
+        assert list(row) == ["name", "value", "reference", "reference_kind", "unit"]
         assert row["value"] is None or isinstance(row["value"], float), row
         assert isinstance(row["reference"], float), row
-        assert row["reference_kind"] in ("published", "truth", "bound", "OpenCV"), row
-        assert "seed 0" not in row["what"]
+        assert row["reference_kind"] in studies.REFERENCE_KINDS, row
+        assert "seed 0" not in row["name"]
     table = pd.read_parquet(results / "summary.parquet")
     assert table["value"].dtype == np.float64
     np.testing.assert_allclose(

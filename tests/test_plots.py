@@ -168,7 +168,15 @@ def _tune(**kw):
     return plots.plot_tune_history(history, label="training RMS (m)", **kw)
 
 
+def _transient(**kw):
+    t = np.linspace(0.0, 2.0, N)
+    ideal = (1 + 5 * t) * np.exp(-5 * t)
+    measured = {"planar": ideal + 0.02 * t * np.exp(-5 * t), "spherical": ideal * 1.01}
+    return plots.plot_transient(t, measured, ideal, **kw)
+
+
 FIGURES = {
+    "transient": _transient,
     "velocity": _velocity,
     "velocity_no_truth": lambda **kw: _velocity(truth=False, **kw),
     "structure": _structure,
@@ -184,6 +192,7 @@ FIGURES = {
     "tune_history": _tune,
 }
 FUNCTIONS = (  # one case per plot function
+    "transient",
     "velocity",
     "structure",
     "camera_velocity",
@@ -219,6 +228,7 @@ def test_every_plot_function_is_exercised():
         "plot_comparison",
         "plot_sweep",
         "plot_tune_history",
+        "plot_transient",
     }
     assert public == used
 

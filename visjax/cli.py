@@ -168,7 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = _Parser(prog="visjax", description="Vision-based estimators in JAX (docs/)")
     parser.add_argument("--version", action="version", version=f"visjax {__version__}")
-    _arg(parser, "--import", None, None, "a module registering problems of your own",
+    _arg(parser, "--import", None, None, "a module registering problems or reproductions of yours",
          dest="modules", action="append", metavar="MODULE")  # fmt: skip
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -261,22 +261,29 @@ def _problem_parser(sub, name, old, who):
 
 def _call(a):
     """The one library call of the command, its parameters taken from the options of the
-    same name (`--format` is `formats`; `--set` is `sets` or `variants`; `--data` `path`)."""
+    same name (`--format` is `formats`; `--set` is `sets` or `variants`): a verb's, or a
+    paper's registered reproduction (`visjax velocity` is the reproduction `velocity`)."""
     from . import verbs
+    from .studies import registered_reproduction
 
     if a.command in (*VERBS, "merge"):
         fn = getattr(verbs, f"{a.command}_command")
+        accepted = inspect.signature(fn).parameters
     elif getattr(a, "data", None) is not None:  # a paper's command on a file: `run PROBLEM`
         options = {"filter_hz": getattr(a, "filter_hz", None)}
         return verbs.run_command(
             a.command, data=a.data, noise=0.0, seed=a.seed, out=a.out, quiet=a.quiet,
             formats=a.format, options=options,
         )  # fmt: skip
+    elif a.command in ("reproduce", "track"):
+        fn = getattr(report, "reproduce" if a.command == "reproduce" else "track_report")
+        accepted = inspect.signature(fn).parameters
     else:
-        fn = getattr(report, "reproduce" if a.command == "reproduce" else f"{a.command}_report")
-    chosen, formats, path = (getattr(a, k, None) for k in ("set", "format", "data"))
-    values = {**vars(a), "formats": formats, "sets": chosen, "variants": chosen, "path": path}
-    return fn(**{k: v for k, v in values.items() if k in inspect.signature(fn).parameters})
+        entry = registered_reproduction(a.command)
+        fn, accepted = entry.rows, inspect.signature(entry.run).parameters
+    chosen, formats = getattr(a, "set", None), getattr(a, "format", None)
+    values = {**vars(a), "formats": formats, "sets": chosen, "variants": chosen}
+    return fn(**{k: v for k, v in values.items() if k in accepted})
 
 
 def _check(a) -> None:
@@ -312,14 +319,14 @@ def _check(a) -> None:
             raise argparse.ArgumentTypeError(
                 "--seeds above 1 needs --noise above 0: noise-free runs are all the same"
             )
-    if a.command in VERBS:
-        from .studies import load_module, registered
+    from .studies import load_module, registered
 
-        for module in a.modules or ():
-            try:  # a module that raises on import: `UserCodeError`, with its traceback
-                load_module(module)
-            except ValueError as e:  # not found, not a module's name: one line
-                raise argparse.ArgumentTypeError(str(e)) from None
+    for module in a.modules or ():  # problems and reproductions of the user's
+        try:  # a module that raises on import: `UserCodeError`, with its traceback
+            load_module(module)
+        except ValueError as e:  # not found, not a module's name: one line
+            raise argparse.ArgumentTypeError(str(e)) from None
+    if a.command in VERBS:
         try:  # the problem's name, options and variants, before any work
             registered(a.problem).check(
                 a.data, a.duration, a.rate, a.set, a.robust, getattr(a, "method", None)

@@ -586,6 +586,38 @@ def plot_euclidean(run, *, title=None, path=None, max_points=2000, formats=("png
         return _finish(fig, title, path, formats)
 
 
+def plot_transient(ts, measured: dict, ideal, *, title=None, path=None, formats=("png",)):
+    """Like the convergence claim of Spica and Robuffo Giordano (active structure from
+    motion): the estimation error $z(t)/z(0)$ of each run (`measured`: label -> (N,), one
+    colour each) against the assigned second-order response (`ideal` (N,), black, dashed)
+    (left), and their difference (right).
+
+    **Arguments:** `ts` (N,) [s]; `measured` label -> (N,); `ideal` (N,); `title`, `path`,
+    `formats` as in the module's docstring. **Returns:** the `Figure` (double column)."""
+    formats = _formats(formats)
+    ts = np.asarray(ts, dtype=float)
+    ideal = np.asarray(ideal, dtype=float)
+    plt = _pyplot(path)
+    with _style():
+        fig, axes = _subplots(plt, 1, 2, DOUBLE_COLUMN, 2.6)
+        left, right = axes[0]
+        handles = []
+        for i, (label, z) in enumerate(measured.items()):
+            z = np.asarray(z, dtype=float)
+            (h,) = left.plot(ts, z, color=f"C{i % 10}", lw=_ESTIMATE_LW, label=label)
+            right.plot(ts, z - ideal, color=f"C{i % 10}", lw=_ESTIMATE_LW)
+            handles.append(h)
+        (h,) = left.plot(ts, ideal, label="assigned response", **_TRUTH)
+        handles.append(h)
+        right.axhline(0.0, **_ZERO)
+        left.set_ylabel("depth error $z(t)/z(0)$ [1]")
+        right.set_ylabel("$z/z(0)$ - assigned [1]")
+        for ax in (left, right):
+            ax.set_xlabel("time [s]")
+        _legend(fig, handles)
+        return _finish(fig, title, path, formats)
+
+
 def plot_feature_estimates(
     ts, estimate, truth=None, *, title=None, path=None, max_points=2000, formats=("png",)
 ):

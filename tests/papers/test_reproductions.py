@@ -4,6 +4,7 @@ the rows of `visjax reproduce`, the seed checks, and the files handed to `write`
 import numpy as np
 import pytest
 
+from visjax import studies
 from visjax.papers import chitrakaran, jang, nath
 from visjax.papers._reproduction import check_seeds, floats, median
 
@@ -33,23 +34,26 @@ def test_reproduce_rows_hold_numbers_and_kinds():
     velocity = {"window_s": [5.0, 10.0], "rms_window": [0.01, 0.04, 0.02], "z1_star_recovered": 2}
     worst = {"visjax": 1e-13, "opencv": 1e-4}
     geometry = {"errors": {w: {"R_bar_deg": {"max": m}} for w, m in worst.items()}}
-    rows = chitrakaran.reproduce_rows(velocity, geometry)
-    assert [r[4] for r in rows] == ["bound", "truth", "OpenCV"]
-    assert rows[0][1] == 0.04 and rows[2][1:4:2] == (1e-13, 1e-4)
+    rows = chitrakaran.velocity_rows(velocity) + chitrakaran.geometry_rows(geometry)
+    assert studies.check_rows("chitrakaran", rows) == rows
+    assert [r["reference_kind"] for r in rows] == ["bound", "truth", "OpenCV"]
+    assert rows[0]["value"] == 0.04 and (rows[2]["value"], rows[2]["reference"]) == (1e-13, 1e-4)
     # the truth of z1* is feature 1's depth in the reference pose, as the scenario has it
     sc = chitrakaran.section6_scenario(0.3, 1000.0)
-    assert rows[1][3] == pytest.approx(float(sc.z1_star), abs=1e-12)
+    assert rows[1]["reference"] == pytest.approx(float(sc.z1_star), abs=1e-12)
 
     structure = {"sets": {n: {"rms": [0.01, 0.02, 0.03], "thesis_rms": list(s.thesis_rms)}
                           for n, s in jang.SETS.items()}}  # fmt: skip
     testbed = {"sets": {"I.1": {"rms": None, "thesis_rms": [0.1, 0.3, 0.2]}}}
-    rows = jang.reproduce_rows(structure, testbed)
+    rows = jang.moving_point_rows(structure) + jang.testbed_rows(testbed)
+    assert studies.check_rows("jang", rows) == rows
     static = [s.thesis_rms for n, s in jang.SETS.items() if n.startswith("I.")]
-    assert rows[0][1] == pytest.approx(0.02) and rows[0][3] == pytest.approx(np.mean(static))
-    assert rows[2][0].endswith("(infeasible)") and rows[2][1] is None and rows[2][3] == 0.3
-    assert nath.reproduce_rows({"final_position_error_m": [2e-4, 5e-4]})[0][1:4] == (
-        0.5, "mm", nath.POSITION_BOUND_MM,
-    )  # fmt: skip
+    assert rows[0]["value"] == pytest.approx(0.02)
+    assert rows[0]["reference"] == pytest.approx(np.mean(static))
+    assert rows[2]["name"].endswith("(infeasible)") and rows[2]["value"] is None
+    assert rows[2]["reference"] == 0.3
+    (row,) = nath.static_points_rows({"final_position_error_m": [2e-4, 5e-4]})
+    assert (row["value"], row["unit"], row["reference"]) == (0.5, "mm", nath.POSITION_BOUND_MM)
 
 
 def test_seed_checks_medians_and_floats():

@@ -286,15 +286,40 @@ SUMMARIES = {
             "run was infeasible)",
         ),
     },
+    "point_depth": {
+        "duration_s": ("float", "the simulated time, s"),
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "projections": (
+            "dict",
+            "per projection (`planar`, `spherical`): `deviation` (the largest gap between "
+            "the depth error z(t)/z(0) and the assigned second-order response), "
+            "`time_to_5pct_s` and `ideal_time_to_5pct_s` (from when each stays below 5%), "
+            "`sigma2_ratio_final` (sigma^2 over its target at the end)",
+        ),
+    },
+    "homography": {
+        "noise_px": ("float", "pixel noise sigma, px"),
+        "seeds": ("int", "noise seeds"),
+        "duration_s": ("float", "the simulated time, s"),
+        "metric": ("str", "the velocity problem's metric (`rms_worst`)"),
+        "trivial": ("float", "the metric of answering zero velocity"),
+        "methods": (
+            "dict",
+            "per front end (`observer`, `four_point`): `median` (the metric's median over "
+            "the seeds that succeeded, `null` if none) and `failed` (runs that did not)",
+        ),
+    },
     "reproduce": {
         "quick": ("bool", "whether `--quick` shortened the runs"),
         "rows": (
             "list[dict]",
-            "the summary table: `what`, `value` (a number, `null` if infeasible), `unit`, "
-            "`reference` (a number, in `unit`) and `reference_kind` (what the reference is: "
+            "the summary table, one row per registered reproduction's number "
+            "(`visjax.studies.ROW_KEYS`): `name`, `value` (a number, `null` if infeasible), "
+            "`reference` (a number, in `unit`), `reference_kind` (what the reference is: "
             "`published` (the paper's value), `truth` (the simulation's), `bound` (the "
             "largest value the project accepts), `OpenCV` (OpenCV's result on the same "
-            "input))",
+            "input), `ideal` (the response the paper's law assigns), `trivial` (the error "
+            "of a trivial estimate)) and `unit`",
         ),
     },
 }
@@ -331,15 +356,21 @@ TABLES = {
         "feasible": "bool",
     },
     "reproduce summary.parquet": {
-        "what": "str",
+        "name": "str",
         "value": "float",
-        "unit": "str",
         "reference": "float",
         "reference_kind": "str",
+        "unit": "str",
     },
 }
 
 ARRAYS = {
+    "point_depth/transient.npz": {
+        "t": "(N,) s",
+        "ideal": "(N,) the assigned second-order response of the depth error, z(t)/z(0)",
+        "z_ratio_planar": "(N,) the measured z(t)/z(0), planar projection",
+        "z_ratio_spherical": "(N,) the same, spherical projection",
+    },
     "velocity/estimate.npz": {
         "t": "(N,) s",
         "v_hat": "(N, 6) the estimate [v_e, w_e] in the camera frame, m/s and rad/s; "

@@ -85,3 +85,56 @@ _studies.register_problem(
     summary="homography of a planar target on SL(3), moving camera (Hamel et al.)",
     replace=True,
 )
+
+# the reproductions `visjax reproduce` runs, in this order (`studies.register_reproduction`)
+_studies.register_reproduction(
+    "velocity",
+    chitrakaran.reproduce_velocity,
+    title="Chitrakaran et al., section 6: the velocity estimator",
+    quick="in full",
+    replace=True,
+)
+_studies.register_reproduction(
+    "geometry",
+    chitrakaran.reproduce_geometry,
+    title="Chitrakaran et al., section 3: Euclidean reconstruction vs OpenCV",
+    quick="20 scenes, not 100",
+    replace=True,
+)
+_studies.register_reproduction(
+    "moving_point",
+    jang.reproduce_moving_point,
+    title="Jang's thesis: the unknown input observer on the seven sets (simulated)",
+    folder="structure",
+    quick="20 s per set, not 30",
+    replace=True,
+)
+_studies.register_reproduction(
+    "static_points",
+    nath.reproduce_static_points,
+    title="Nath et al.: Euclidean structure from an uncalibrated moving camera",
+    folder="euclidean",
+    quick="20 s, not 30",
+    replace=True,
+)
+_studies.register_reproduction(
+    "testbed",
+    jang.reproduce_testbed,
+    title="Jang's thesis, chapters 4-5: the testbed twin (PUMA 560, rendered video, KLT)",
+    quick="sets I.1 and II.1 of 10 s, without the camera matrix and v_py studies",
+    replace=True,
+)
+_studies.register_reproduction(
+    "point_depth",
+    spica.reproduce_point_depth,
+    title="Spica et al.: the depth error against the assigned second-order response",
+    quick="1.5 s, not 2",
+    replace=True,
+)
+_studies.register_reproduction(
+    "homography",
+    hamel.reproduce_homography,
+    title="Hamel et al.: the SL(3) observer as the velocity estimator's front end",
+    quick="2 seeds of 4 s, not 5 of 10",
+    replace=True,
+)

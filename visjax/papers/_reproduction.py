@@ -1,13 +1,16 @@
-"""What a paper's reproduction hands to `visjax.report`: the summary's keys and the printed
-lines (`Reproduction`); the files to write go to a `write` callback as `visjax.io.Outputs` as soon
-as they are ready. The reproductions compute; the report writes and prints."""
+"""What a paper's reproduction computes: the summary's keys and the printed lines
+(`Reproduction`); the files to write go to a `write` callback as `visjax.io.Outputs` as soon
+as they are ready. `write_report` runs one, writes its files and summary and prints: what
+each paper's registered reproduction (`visjax.studies.register_reproduction`) does."""
 
 import dataclasses
 import time
+from pathlib import Path
 
 import numpy as np
 
-from ..studies import StudyTooLong
+from ..io import command_summary, write_outputs
+from ..studies import RunFailed, StudyTooLong
 
 
 @dataclasses.dataclass(frozen=True)
@@ -23,6 +26,33 @@ class Reproduction:
     settings: dict = dataclasses.field(default_factory=dict)
     seed: int | None = None
     failure: str | None = None
+
+
+def write_report(kind: str, settings: dict, out, formats, reproduce) -> dict:
+    """Run `reproduce(write)` (a paper's reproduction, returning a `Reproduction`), writing
+    its files into `out` as they come (nothing without `out`), then its `summary.json`
+    (kind `kind`); print its lines and the files written; raise its failure, if any, after
+    everything is written (`visjax.studies.RunFailed`). **Returns:** the summary."""
+    started = time.perf_counter()
+    out = None if out is None else Path(out)
+    written = []
+
+    def write(outputs):
+        written.extend(write_outputs(outputs, out, formats))
+
+    rep = reproduce(None if out is None else write)
+    settings = {**settings, **rep.settings, "formats": list(formats)}
+    summary = command_summary(
+        kind, rep.body, settings=settings, seed=rep.seed, started=started, out=out
+    )
+    print("\n".join(rep.lines))
+    if out is not None:
+        shown = ", ".join(["summary.json", *written[:8]])
+        more = f" and {len(written) - 8} more" if len(written) > 8 else ""
+        print(f"wrote {out}/: {shown}{more}")
+    if rep.failure is not None:
+        raise RunFailed(rep.failure)
+    return summary
 
 
 def check_seeds(seeds, noise) -> None:

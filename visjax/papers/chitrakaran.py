@@ -45,7 +45,15 @@ from ..sim import (
     sinusoidal_trajectory,
     view,
 )
-from ._reproduction import Reproduction, SeedClock, check_seeds, median, stages
+from ..studies import reproduction_row
+from ._reproduction import (
+    Reproduction,
+    SeedClock,
+    check_seeds,
+    median,
+    stages,
+    write_report,
+)
 
 A_EQ62 = ((1268.16, 0.0, 257.49), (0.0, 1267.50, 253.10), (0.0, 0.0, 1.0))
 R_STAR_EQ61 = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
@@ -490,32 +498,105 @@ VELOCITY_BOUND = 0.05
 (m/s or rad/s): the paper's Fig. 2 shows errors well inside it once the estimate converges."""
 
 
-def reproduce_rows(velocity: dict, geometry: dict) -> list[tuple]:
-    """The rows of `visjax reproduce`'s table for this paper, from the summaries of
-    `velocity_reproduction` and `geometry_reproduction`: (what, value, unit, reference,
-    reference kind)."""
-    a, b = velocity["window_s"]
-    g = geometry["errors"]
+def reproduce_velocity(
+    out=None,
+    *,
+    quick: bool = False,
+    quiet: bool = False,
+    formats=("png",),
+    duration: float = 10.0,
+    rate: float = 1000.0,
+    noise: float = 0.0,
+    seed: int = 0,
+    seeds: int = 1,
+    K=None,
+    rho=None,
+    max_hours: float = 24.0,
+) -> list[dict]:
+    """Section 6 (`velocity_reproduction`), registered as the reproduction `velocity`
+    (what `visjax velocity` runs): `summary.json` (kind `velocity`), `estimate.npz` and
+    `velocity.<format>` (like the paper's Fig. 2) into `out`. `--quick` runs it in full.
+    **Returns:** its rows of `visjax reproduce`'s table: the largest RMS error over the
+    window against `VELOCITY_BOUND`, and the recovered $z_1^*$ against the truth."""
+    settings = dict(duration=duration, rate=rate, noise=noise, seed=seed, seeds=seeds, K=K, rho=rho)
+    summary = write_report(
+        "velocity",
+        settings,
+        out,
+        formats,
+        lambda write: velocity_reproduction(
+            duration,
+            rate,
+            noise,
+            seed=seed,
+            seeds=seeds,
+            K=K,
+            rho=rho,
+            quiet=quiet,
+            write=write,
+            max_hours=max_hours,
+        ),  # fmt: skip
+    )
+    return velocity_rows(summary)
+
+
+def velocity_rows(summary: dict) -> list[dict]:
+    """The rows of `visjax reproduce`'s table from a `velocity` summary: the largest RMS
+    error over the window against `VELOCITY_BOUND`, the recovered $z_1^*$ against the truth."""
+    a, b = summary["window_s"]
+    z1 = float((np.asarray(R_STAR_EQ61) @ FEATURES[0] + X_F_STAR_EQ60)[2])
     return [
-        (
+        reproduction_row(
             f"Chitrakaran et al., velocity: largest RMS error {a:g}-{b:g} s",
-            max(velocity["rms_window"]),
-            "m/s or rad/s",
+            max(summary["rms_window"]),
             VELOCITY_BOUND,
             "bound",
+            "m/s or rad/s",
         ),
-        (
-            "Chitrakaran et al., z1* recovered",
-            velocity["z1_star_recovered"],
-            "m",
-            float((np.asarray(R_STAR_EQ61) @ FEATURES[0] + X_F_STAR_EQ60)[2]),
-            "truth",
+        reproduction_row(
+            "Chitrakaran et al., z1* recovered", summary["z1_star_recovered"], z1, "truth", "m"
         ),
-        (
+    ]
+
+
+def reproduce_geometry(
+    out=None,
+    *,
+    quick: bool = False,
+    quiet: bool = False,
+    formats=("png",),
+    scenes: int | None = None,
+    points: int = 4,
+    noise: float = 0.0,
+    seed: int = 0,
+) -> list[dict]:
+    """Section 3 (`geometry_reproduction`), registered as the reproduction `geometry`
+    (what `visjax geometry` runs): random planar scenes reconstructed by visjax and by
+    OpenCV, both against the truth; `summary.json` (kind `geometry`), `scenes.parquet` and
+    `geometry.<format>` into `out`. `scenes`: 100, 20 with `quick`. **Returns:** its row:
+    visjax's largest $\bar R$ error against OpenCV's."""
+    scenes = (20 if quick else 100) if scenes is None else scenes
+    settings = dict(scenes=scenes, points=points, noise=noise, seed=seed)
+    summary = write_report(
+        "geometry",
+        settings,
+        out,
+        formats,
+        lambda write: geometry_reproduction(scenes, points, noise, seed, quiet=quiet, write=write),
+    )
+    return geometry_rows(summary)
+
+
+def geometry_rows(summary: dict) -> list[dict]:
+    """The row of `visjax reproduce`'s table from a `geometry` summary: visjax's largest
+    $\\bar R$ error against OpenCV's."""
+    g = summary["errors"]
+    return [
+        reproduction_row(
             "Chitrakaran et al., reconstruction: largest R_bar error",
             g["visjax"]["R_bar_deg"]["max"],
-            "deg",
             g["opencv"]["R_bar_deg"]["max"],
             "OpenCV",
-        ),
+            "deg",
+        )
     ]

@@ -57,7 +57,15 @@ from ..estimators import (
 )
 from ..io import Outputs
 from ..sim import add_pixel_noise, hold_indices, moving_camera_point, sample_times
-from ._reproduction import Reproduction, SeedClock, check_seeds, floats, median
+from ..studies import reproduction_row
+from ._reproduction import (
+    Reproduction,
+    SeedClock,
+    check_seeds,
+    floats,
+    median,
+    write_report,
+)
 
 KC_TOOLBOX = ((560.98005, 0.0, 303.91196), (0.0, 749.53852, 345.99906), (0.0, 0.0, 1.0))
 KC_REFINED = ((551.9794, 0.0, 304.0282), (0.0, 737.5125, 331.5052), (0.0, 0.0, 1.0))
@@ -1141,27 +1149,129 @@ def camera_matrix_to_theta(K) -> list[float]:
     return [K[0, 0], K[1, 1], K[0, 2], K[1, 2]]
 
 
-def reproduce_rows(structure: dict, testbed: dict) -> list[tuple]:
-    """The rows of `visjax reproduce`'s table for the thesis, from the summaries of
-    `structure_reproduction` and `testbed_reproduction`: (what, value, unit, reference,
-    reference kind)."""
+def reproduce_moving_point(
+    out=None,
+    *,
+    quick: bool = False,
+    quiet: bool = False,
+    formats=("png",),
+    sets=None,
+    duration: float | None = None,
+    noise: float = 0.1,
+    seed: int = 0,
+    seeds: int = 1,
+    max_hours: float = 24.0,
+) -> list[dict]:
+    """The UIO on the simulated analogues of the seven sets (`structure_reproduction`),
+    registered as the reproduction `moving_point` (what `visjax moving_point` runs):
+    `summary.json` (kind `structure`), `sets.parquet`, per set `estimate_<set>.npz`,
+    `structure_<set>.<format>` and `camera_velocity_<set>.<format>` into `out`.
+    `duration` per set: 30 s, 20 with `quick`. **Returns:** its rows: the mean RMS of the
+    static sets (I.x) and of the moving ones (II.x) against the thesis' Tables 5-3/5-4."""
+    duration = (20.0 if quick else 30.0) if duration is None else duration
+    settings = dict(sets=sets, duration=duration, noise=noise, seed=seed, seeds=seeds)
+    summary = write_report(
+        "structure",
+        settings,
+        out,
+        formats,
+        lambda write: structure_reproduction(
+            sets,
+            duration,
+            noise,
+            seed=seed,
+            seeds=seeds,
+            quiet=quiet,
+            write=write,
+            max_hours=max_hours,
+        ),  # fmt: skip
+    )
+    return moving_point_rows(summary)
+
+
+def moving_point_rows(summary: dict) -> list[dict]:
+    """The rows of `visjax reproduce`'s table from a `structure` summary: the mean RMS of
+    the static sets (I.x) and of the moving ones (II.x) against the thesis'."""
     rows = []
-    st = structure["sets"]
+    st = summary["sets"]
     for group, what in (("I.", "static"), ("II.", "moving")):
         names = [n for n in st if n.startswith(group)]
+        if not names:
+            continue
         mean = float(np.mean([st[n]["rms"] for n in names]))
         thesis = float(np.mean([st[n]["thesis_rms"] for n in names]))
-        rows.append((f"Jang's thesis, UIO, {what} point: mean RMS", mean, "m", thesis, "published"))
-    for name, e in testbed["sets"].items():
+        rows.append(
+            reproduction_row(
+                f"Jang's thesis, UIO, {what} point: mean RMS", mean, thesis, "published", "m"
+            )
+        )
+    return rows
+
+
+def reproduce_testbed(
+    out=None,
+    *,
+    quick: bool = False,
+    quiet: bool = False,
+    formats=("png",),
+    sets=None,
+    units: str = "cm",
+    duration: float | None = None,
+    seed: int = 0,
+    video: bool = True,
+    studies: bool | None = None,
+) -> list[dict]:
+    """Chapters 4-5 on the testbed twin (`testbed_reproduction`), registered as the
+    reproduction `testbed` (what `visjax testbed` runs): `summary.json` (kind `testbed`),
+    `tables.parquet/.csv`, `testbed_<set>.<format>/.mp4/.npz`, and with `studies`
+    `calibration.json` and `sensitivity.parquet/.csv` into `out`. With `quick`: sets I.1
+    and II.1, 10 s each, no studies (else every set, 30 s, the studies). **Returns:** its
+    rows: each set's worst-axis RMS against the thesis'."""
+    import time
+
+    if quick:
+        sets = ["I.1", "II.1"] if sets is None else sets
+    duration = (10.0 if quick else 30.0) if duration is None else duration
+    studies = (not quick) if studies is None else studies
+    settings = dict(
+        sets=sets, units=units, duration=duration, seed=seed, video=video, studies=studies
+    )
+    started = time.time()
+    summary = write_report(
+        "testbed",
+        settings,
+        out,
+        formats,
+        lambda write: testbed_reproduction(
+            sets,
+            units,
+            duration,
+            seed=seed,
+            video=video,
+            studies=studies,
+            quiet=quiet,
+            write=write,
+        ),  # fmt: skip
+    )
+    if not quiet:
+        print(f"({time.time() - started:.0f} s)")
+    return testbed_rows(summary)
+
+
+def testbed_rows(summary: dict) -> list[dict]:
+    """The rows of `visjax reproduce`'s table from a `testbed` summary: each set's
+    worst-axis RMS against the thesis'."""
+    rows = []
+    for name, e in summary["sets"].items():
         rms = e["rms"]
         rows.append(
-            (
+            reproduction_row(
                 f"Jang's thesis, testbed twin set {name}: worst-axis RMS"
                 + ("" if rms is not None else " (infeasible)"),
                 max(rms) if rms is not None else None,
-                "m",
                 float(max(e["thesis_rms"])),
                 "published",
+                "m",
             )
         )
     return rows

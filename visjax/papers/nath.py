@@ -42,7 +42,15 @@ from ..sim import (
     sample_times,
     view,
 )
-from ._reproduction import Reproduction, SeedClock, check_seeds, median, stages
+from ..studies import reproduction_row
+from ._reproduction import (
+    Reproduction,
+    SeedClock,
+    check_seeds,
+    median,
+    stages,
+    write_report,
+)
 
 
 @final
@@ -327,16 +335,53 @@ def euclidean_reproduction(
     return Reproduction(body, lines, seed=seed if noise_px > 0 else None)
 
 
-def reproduce_rows(euclidean: dict) -> list[tuple]:
-    """The row of `visjax reproduce`'s table for this paper, from the summary of
-    `euclidean_reproduction`: (what, value, unit, reference, reference kind)."""
-    e = euclidean["final_position_error_m"]
+def reproduce_static_points(
+    out=None,
+    *,
+    quick: bool = False,
+    quiet: bool = False,
+    formats=("png",),
+    duration: float | None = None,
+    noise: float = 0.0,
+    seed: int = 0,
+    seeds: int = 1,
+    max_hours: float = 24.0,
+) -> list[dict]:
+    """The adaptive least-squares structure estimator on its simulation
+    (`euclidean_reproduction`), registered as the reproduction `static_points` (what
+    `visjax static_points` runs): `summary.json` (kind `euclidean`), `estimate.npz` and
+    `euclidean.<format>` into `out`. `duration`: 30 s, 20 with `quick`. **Returns:** its
+    row: the largest final position error against `POSITION_BOUND_MM`."""
+    duration = (20.0 if quick else 30.0) if duration is None else duration
+    settings = dict(duration=duration, noise=noise, seed=seed, seeds=seeds)
+    summary = write_report(
+        "euclidean",
+        settings,
+        out,
+        formats,
+        lambda write: euclidean_reproduction(
+            duration,
+            noise,
+            seed=seed,
+            seeds=seeds,
+            quiet=quiet,
+            write=write,
+            max_hours=max_hours,
+        ),  # fmt: skip
+    )
+    return static_points_rows(summary)
+
+
+def static_points_rows(summary: dict) -> list[dict]:
+    """The row of `visjax reproduce`'s table from a `euclidean` summary: the largest final
+    position error against `POSITION_BOUND_MM`."""
+    e = summary["final_position_error_m"]
     return [
-        (
+        reproduction_row(
             "Nath et al., structure: largest final position error",
             max(e) * 1000,
-            "mm",
             POSITION_BOUND_MM,
             "bound",
+            "mm",
         )
     ]

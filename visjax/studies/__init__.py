@@ -44,6 +44,17 @@ from ._registry import (
     register_problem as register_problem,
     registered as registered,
 )
+from ._reproductions import (
+    REFERENCE_KINDS as REFERENCE_KINDS,
+    ROW_KEYS as ROW_KEYS,
+    RegisteredReproduction as RegisteredReproduction,
+    RunFailed as RunFailed,
+    check_rows as check_rows,
+    register_reproduction as register_reproduction,
+    registered_reproduction as registered_reproduction,
+    reproduction_names as reproduction_names,
+    reproduction_row as reproduction_row,
+)
 from ._sweep import (
     MemoryLimitError as MemoryLimitError,
     available_memory as available_memory,
