@@ -18,7 +18,7 @@ from visjax import sim
 from visjax.design import design_uio, design_uio_for_motion
 from visjax.estimators import (
     THESIS_A_U,
-    MovingPointObserver,
+    MovingPointEstimator,
     SaveAt,
     moving_point_stream,
     run,
@@ -72,7 +72,7 @@ def velocity_range(name: str, margin: float = 1.1):
 
 def design(name: str, option: str, **grid):
     """The observer fields of a scene for one design option (see `DESIGNS`), and the
-    `UIODesign`; `grid` goes to `design_uio_for_motion` (the test uses a small grid)."""
+    `MovingPointDesign`; `grid` goes to `design_uio_for_motion` (the test uses a small grid)."""
     s = SCENES[name]
     C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     D1 = np.array(s["D1"])
@@ -116,10 +116,10 @@ def design(name: str, option: str, **grid):
     raise ValueError(option)
 
 
-def observer(name: str, fields) -> MovingPointObserver:
+def observer(name: str, fields) -> MovingPointEstimator:
     s = SCENES[name]
     fields = {"D": s["D1"], "D2": s["D2"], **fields}
-    return MovingPointObserver(x3_guess=X3_GUESS, **fields)
+    return MovingPointEstimator(x3_guess=X3_GUESS, **fields)
 
 
 def rms_last_half(name: str, obs, truth, stream, throw: bool = True):

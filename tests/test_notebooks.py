@@ -26,7 +26,7 @@ CASES = {
     ),
     "moving_point.ipynb": (
         ("rank condition (3.20): True", "result: successful", "traces so far: 1", "seeds in"),
-        "MovingPointObserver",
+        "MovingPointEstimator",
     ),
     "static_points.ipynb": (
         ("covariance resets", "result: successful", "traces so far: 1", "seeds in"),
@@ -34,11 +34,11 @@ CASES = {
     ),
     "point_depth.ipynb": (
         ("closed loop, result: successful", "result: successful", "traces so far: 1", "seeds in"),
-        "PointDepthObserver",
+        "PointDepthEstimator",
     ),
     "homography.ipynb": (
         ("velocity front ends", "result: successful", "traces so far: 1", "seeds in"),
-        "HomographyObserver",
+        "HomographyEstimator",
     ),
     "gain_tuning.ipynb": (
         ("held-out improvement", "certified Lipschitz bound", "central difference", "10 %"),

@@ -173,3 +173,21 @@ class Note(str):
 
     def __hash__(self):
         return 0
+
+
+def renamed(module: str, names: dict[str, str], namespace: dict):
+    """A module's `__getattr__` that still gives each old name of `names` (old -> new) its
+    new object, with a `FutureWarning` naming the new one (the old vocabulary, read on)."""
+    import warnings
+
+    def __getattr__(name: str):
+        if name in names:
+            warnings.warn(
+                f"{module}.{name} is now {module}.{names[name]}: the old name will go",
+                FutureWarning,
+                stacklevel=2,
+            )
+            return namespace[names[name]]
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+
+    return __getattr__

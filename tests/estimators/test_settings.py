@@ -14,7 +14,7 @@ import pytest
 
 from visjax import RESULTS
 from visjax.estimators import (
-    MovingPointObserver,
+    MovingPointEstimator,
     SaveAt,
     StaticPointsEstimator,
     VelocityEstimator,
@@ -108,7 +108,7 @@ SHAPE_CASES = {
 BUILD = {"velocity": _velocity, "uio": _uio, "adaptive": _adaptive}
 CLASSES = {
     "velocity": VelocityEstimator,
-    "uio": MovingPointObserver,
+    "uio": MovingPointEstimator,
     "adaptive": StaticPointsEstimator,
 }
 

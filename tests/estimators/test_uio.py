@@ -9,7 +9,7 @@ import pytest
 from visjax import RESULTS
 from visjax.estimators import (
     AbstractEstimator,
-    MovingPointObserver,
+    MovingPointEstimator,
     SaveAt,
     rank_condition,
     run,
@@ -51,7 +51,7 @@ def test_reduction_oracle_without_unknown_input():
     s = SETS["I.1"]
     sc = moving_camera_scenario("I.1", 3.0)
     K = jnp.array(s.K).at[2].set(jnp.array([-0.5, -1.0]))
-    uio = MovingPointObserver(
+    uio = MovingPointEstimator(
         A=jnp.array(s.A, float),
         D=jnp.zeros((3, 1)),
         K=K,
@@ -111,7 +111,7 @@ def test_vmap_over_seeds_and_sets_and_grad():
 
 def test_observer_shape_errors():
     with pytest.raises(ValueError, match=r"`K` must have shape \(3, 2\)"):
-        MovingPointObserver(
+        MovingPointEstimator(
             A=jnp.zeros((3, 3)),
             D=jnp.zeros((3, 1)),
             K=jnp.zeros((2, 2)),
@@ -171,7 +171,7 @@ def test_the_rank_condition_is_checked_by_the_observer_and_the_design():
     failing = [message for ok, message in bad.checks() if not bool(ok)]
     assert any("rank condition (3.20)" in message for message in failing)
     stream = moving_camera_scenario("I.1", 1.0).held_stream()
-    with pytest.raises(ValueError, match="MovingPointObserver"):
+    with pytest.raises(ValueError, match="MovingPointEstimator"):
         run(bad, stream)
     with pytest.raises(ValueError, match=r"rank condition \(3.20\)"):
         design_uio(np.zeros((3, 3)), C, np.array(s.D, float)[:, None], 1.0)
@@ -188,7 +188,7 @@ def test_D_as_a_vector_and_the_new_fields_defaults():
 
     s = SETS["II.1"]
     col = observer_for("II.1")
-    vec = MovingPointObserver(A=s.A, D=np.array(s.D, float), K=s.K, Y=s.Y, x3_guess=0.01)
+    vec = MovingPointEstimator(A=s.A, D=np.array(s.D, float), K=s.K, Y=s.Y, x3_guess=0.01)
     assert vec.D.shape == (3, 1) and vec.D2.shape == (3, 1)
     assert not bool(vec.time_varying)
     assert np.all(np.asarray(vec.disturbance_input()) == 0)
@@ -199,7 +199,7 @@ def test_D_as_a_vector_and_the_new_fields_defaults():
     fields = dict(A=s.A, D=s.D, K=s.K, Y=s.Y, x3_guess=0.01)
     for name, shape in (("D2", (2,)), ("A_u", (3, 3)), ("K_u", (6, 2, 3)), ("P", (3,))):
         with pytest.raises(ValueError, match=f"`{name}` must have shape"):
-            MovingPointObserver(**fields, **{name: np.zeros(shape)})
+            MovingPointEstimator(**fields, **{name: np.zeros(shape)})
     # a dropped first frame has nothing to hold: the builder raises, or the run still
     # stops at sample 0
     pixels = np.asarray(sc.frame_pixels).copy()

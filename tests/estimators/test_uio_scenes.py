@@ -16,8 +16,8 @@ from visjax import RESULTS
 from visjax.design import design_uio
 from visjax.estimators import (
     THESIS_A_U,
-    MovingCameraMeasurement,
-    MovingPointObserver,
+    MovingPointEstimator,
+    MovingPointMeasurement,
     SaveAt,
     moving_point_stream,
     run,
@@ -131,12 +131,12 @@ def test_uub_split_error_is_the_predicted_bias_and_within_the_bound():
     disturbance (the UUB split). With a constant camera velocity, A = A(u) makes f_bar = 0,
     so the error obeys e' = N e - M D2 d2 with d2 = v_py x3 constant: it settles at
     e_ss = N^-1 M D2 d2 exactly (an independent prediction from `disturbance_input`), which
-    lies inside `UIODesign.ultimate_bound`, and which scales with d2."""
+    lies inside `MovingPointDesign.ultimate_bound`, and which scales with d2."""
     u = np.array([0.3, 0.2, 0.0, 0.0, 0.0, 0.0])
     A = np.einsum("j,jab->ab", u, THESIS_A_U)
     D1, D2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
     d = design_uio(A, C, D1, 1e-3, uub=True, alpha=1.0)
-    obs = MovingPointObserver(A=A, D=D1, D2=D2, K=d.K, Y=d.Y, x3_guess=0.3)
+    obs = MovingPointEstimator(A=A, D=D1, D2=D2, K=d.K, Y=d.Y, x3_guess=0.3)
     errors = []
     for vpy in (0.01, 0.02):
         sc, stream = _constant_velocity_scene([0.05, vpy, 0.0])
@@ -159,8 +159,8 @@ def test_time_varying_A_at_constant_velocity_equals_the_fixed_observer():
     u = np.asarray(sc.camera_velocity[0])
     A = np.einsum("j,jab->ab", u, THESIS_A_U)
     d = design_uio(A, C, [1.0, 0.0, 0.0], 1e-3, alpha=0.5)
-    fixed = MovingPointObserver(A=A, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3)
-    varying = MovingPointObserver(
+    fixed = MovingPointEstimator(A=A, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3)
+    varying = MovingPointEstimator(
         A=np.zeros((3, 3)), A_u=THESIS_A_U, P=d.P, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3
     )
     a = run(fixed, stream, saveat=SaveAt(every=50)).outputs.x_hat
@@ -181,9 +181,9 @@ def test_time_varying_certificate_is_checked_per_sample(sideways):
     state = obs.init(jax.tree_util.tree_map(lambda x: x[0], stream.ys))
     y = stream.ys.y[0]
     for u in (np.zeros(6), np.array([0.69, 0, 0, 0, 0, 0]), np.array([-0.69, 0, 0, 0, 0, 0])):
-        assert bool(obs.valid(state, MovingCameraMeasurement(y=y, u=jnp.asarray(u))))
+        assert bool(obs.valid(state, MovingPointMeasurement(y=y, u=jnp.asarray(u))))
     bad_u = jnp.array([0.3, 0.0, 0.0, 0.0, 0.0, 50.0])
-    assert not bool(obs.valid(state, MovingCameraMeasurement(y=y, u=bad_u)))
+    assert not bool(obs.valid(state, MovingPointMeasurement(y=y, u=bad_u)))
     u = np.asarray(stream.ys.u).copy()
     u[100:, 5] = 50.0
     spun = eqx.tree_at(lambda s: s.ys.u, stream, jnp.asarray(u))

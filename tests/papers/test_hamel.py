@@ -62,7 +62,7 @@ def test_innovation_against_a_numpy_transcription(scene):
     assert abs(np.trace(got)) < 1e-15  # in sl(3)
     # zero at the truth, and the observer then moves with the truth: dH/dt = H A
     np.testing.assert_allclose(hamel.homography_innovation(Hs[500], y.p, p_ref), 0.0, atol=1e-15)
-    obs = hamel.HomographyObserver(k_P=5.0, p_ref=p_ref)
+    obs = hamel.HomographyEstimator(k_P=5.0, p_ref=p_ref)
     state = hamel.HomographyState(jnp.asarray(Hs[500]), jnp.zeros((3, 3)))
     field = obs.vector_field(0.5, state, y)
     np.testing.assert_allclose(field.H, Hs[500] @ A0, atol=1e-14)
@@ -75,10 +75,10 @@ def test_truth_kept_and_convergence_from_the_identity(scene):
     60-degree field of view leave one slow direction), the correspondence cost never
     increases by more than round-off, and det = 1 to 1e-12 at every saved sample."""
     ts, p_ref, Hs, stream = scene
-    kept = run(hamel.HomographyObserver(k_P=5.0, p_ref=p_ref, H0=Hs[0]), stream)
+    kept = run(hamel.HomographyEstimator(k_P=5.0, p_ref=p_ref, H0=Hs[0]), stream)
     assert kept.result == RESULTS.successful
     assert np.abs(np.asarray(kept.outputs.H) - Hs).max() < 1e-5
-    sol = run(hamel.HomographyObserver(k_P=100.0, p_ref=p_ref), stream)
+    sol = run(hamel.HomographyEstimator(k_P=100.0, p_ref=p_ref), stream)
     assert sol.result == RESULTS.successful
     H = np.asarray(sol.outputs.H)
     err = np.linalg.norm(H @ np.linalg.inv(Hs) - np.eye(3), axis=(1, 2))
@@ -93,7 +93,7 @@ def test_jit_vmap_grad(scene):
 
     def final_error(k):
         sol = run(
-            hamel.HomographyObserver(k_P=k, p_ref=p_ref), stream, saveat=SaveAt(outputs=False)
+            hamel.HomographyEstimator(k_P=k, p_ref=p_ref), stream, saveat=SaveAt(outputs=False)
         )
         return jnp.sum((sol.final_state.H @ jnp.linalg.inv(Hs[-1]) - jnp.eye(3)) ** 2)
 
@@ -118,15 +118,15 @@ def test_bad_input(scene, no_jaxtyping):
     with pytest.raises(ValueError, match="group_velocity"):
         hamel.homography_stream(ts, good_px, A[:, :2], K)
     with pytest.raises(ValueError, match="n >= 4"):
-        hamel.HomographyObserver(k_P=1.0, p_ref=p_ref[:3])
+        hamel.HomographyEstimator(k_P=1.0, p_ref=p_ref[:3])
     # an estimate that sends a point more than 90 degrees from its reference direction
-    obs = hamel.HomographyObserver(k_P=1.0, p_ref=p_ref)
+    obs = hamel.HomographyEstimator(k_P=1.0, p_ref=p_ref)
     y = stream.measurement(0)
     assert obs.valid(hamel.HomographyState(jnp.asarray(Hs[0]), jnp.zeros((3, 3))), y)
     flipped = np.diag([1.0, -1.0, -1.0]) @ Hs[0]  # det 1, every bearing turned about x
     assert not obs.valid(hamel.HomographyState(jnp.asarray(flipped), jnp.zeros((3, 3))), y)
     with pytest.raises(ValueError, match="H0"):
-        run(hamel.HomographyObserver(k_P=1.0, p_ref=p_ref, H0=np.zeros((3, 3))), stream)
+        run(hamel.HomographyEstimator(k_P=1.0, p_ref=p_ref, H0=np.zeros((3, 3))), stream)
 
 
 # ---------------------------------------------------------------------------------------
@@ -142,7 +142,7 @@ def test_integral_term_against_numpy_and_its_lyapunov_function(scene):
     0.05 of A0, whose largest entry is 0.2; measured 1.5e-3 and 0.018)."""
     ts, p_ref, Hs, stream = scene
     blind = hamel.homography_stream(ts, _pixels(p_ref, Hs), np.zeros((ts.size, 3, 3)), K)
-    obs = hamel.HomographyObserver(k_P=100.0, p_ref=p_ref, k_I=500.0)
+    obs = hamel.HomographyEstimator(k_P=100.0, p_ref=p_ref, k_I=500.0)
     y = blind.measurement(300)
     H = Hs[300] + 0.03 * _RNG.normal(size=(3, 3))
     G = 0.1 * _RNG.normal(size=(3, 3))

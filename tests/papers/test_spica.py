@@ -80,7 +80,7 @@ def test_vector_field_against_a_numpy_transcription(scene, projection):
     rng = np.random.default_rng(3)
     s_hat = np.asarray(y.s) + 0.01 * rng.normal(size=y.s.shape)
     chi_hat = 1.0 / rng.uniform(0.5, 3.0, size=len(POINTS))
-    obs = spica.PointDepthObserver(**GAINS, projection=projection)
+    obs = spica.PointDepthEstimator(**GAINS, projection=projection)
     got = obs.vector_field(0.3, spica.PointDepthState(jnp.asarray(s_hat), jnp.asarray(chi_hat)), y)
     ref = _numpy_field(np.asarray(y.s), s_hat, chi_hat, np.asarray(y.u), 1000.0, 20.0, projection)
     np.testing.assert_allclose(got.s_hat, ref[0], rtol=1e-13, atol=1e-15)
@@ -96,7 +96,7 @@ def test_true_state_is_kept_and_a_wrong_one_converges(scene, projection):
     ts, P, pixels, twists = scene
     s, chi = _truth(P, projection)
     stream = spica.point_depth_stream(ts, pixels, twists, A, projection=projection)
-    obs = spica.PointDepthObserver(**GAINS, projection=projection)
+    obs = spica.PointDepthEstimator(**GAINS, projection=projection)
     true0 = spica.PointDepthState(jnp.asarray(s[0]), jnp.asarray(chi[0]))
     kept = run(obs, stream, saveat=SaveAt(every=10), state0=true0)
     assert kept.result == RESULTS.successful
@@ -119,7 +119,7 @@ def test_jit_vmap_grad(scene):
     chi_true = 1.0 / np.asarray(P[-1, :, 2])
 
     def final_error(alpha):
-        obs = spica.PointDepthObserver(alpha=alpha, h=20.0, chi0=GAINS["chi0"])
+        obs = spica.PointDepthEstimator(alpha=alpha, h=20.0, chi0=GAINS["chi0"])
         sol = run(obs, stream, saveat=SaveAt(outputs=False))
         return jnp.sum((sol.final_state.chi_hat - chi_true) ** 2)
 
@@ -139,7 +139,7 @@ def test_bad_input(scene, no_jaxtyping):
     with pytest.raises(Exception, match="sample 40"):
         spica.point_depth_stream(ts, bad, twists, A)
     sol = run(
-        spica.PointDepthObserver(**GAINS),
+        spica.PointDepthEstimator(**GAINS),
         spica.point_depth_stream(ts, bad, twists, A, throw=False),
         saveat=SaveAt(outputs=False),
         throw=False,
@@ -147,11 +147,11 @@ def test_bad_input(scene, no_jaxtyping):
     assert sol.result == RESULTS.nonfinite_measurement and int(sol.failed_sample) == 40
     with pytest.raises(ValueError, match="chi0"):
         run(
-            spica.PointDepthObserver(alpha=1.0, h=1.0, chi0=-0.5),
+            spica.PointDepthEstimator(alpha=1.0, h=1.0, chi0=-0.5),
             spica.point_depth_stream(ts, pixels, twists, A),
         )
     with pytest.raises(ValueError, match="projection"):
-        spica.PointDepthObserver(**GAINS, projection="fisheye")
+        spica.PointDepthEstimator(**GAINS, projection="fisheye")
     with pytest.raises(ValueError, match="twists"):
         spica.point_depth_stream(ts, pixels, twists[:, :3], A)
 
@@ -316,7 +316,7 @@ def test_closed_loop_follows_the_assigned_second_order_response(transients, proj
 
 
 def _loop(sigma_des, points0=((0.05, -0.03, 1.0),), v0=(0.05, 0.0, 0.0), chi0=0.5):
-    observer = spica.PointDepthObserver(alpha=1000.0, h=2 * jnp.asarray(sigma_des), chi0=chi0)
+    observer = spica.PointDepthEstimator(alpha=1000.0, h=2 * jnp.asarray(sigma_des), chi0=chi0)
     return spica.ActivePointDepth(
         observer=observer,
         points0=jnp.asarray(points0, float),

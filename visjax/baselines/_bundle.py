@@ -28,7 +28,7 @@ from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._results import RESULTS, all_finite, first_failure, raise_or_keep
 from .._util import as_float, check_shape
-from ..estimators import AdaptiveOutput, Solution, StaticPointsEstimator, Stream
+from ..estimators import Solution, StaticPointsEstimator, StaticPointsOutput, Stream
 from ..geometry import so3_exp, so3_log
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
 from ._losses import as_loss, covariance
@@ -200,7 +200,7 @@ def bundle_adjustment(
         $\\frac12\\sum r^2$ over the pixel residuals $r$).
     - `throw`: raise on failure (default), else report it in `Solution.result`.
 
-    **Returns:** a `Solution` with `ts = stream.ts`, `outputs` an `AdaptiveOutput` per
+    **Returns:** a `Solution` with `ts = stream.ts`, `outputs` an `StaticPointsOutput` per
     sample, `diagnostics` a `BundleDiagnostics` per fit, `result` (the solver's code
     promoted into `RESULTS`, `nonfinite_state` for a non-finite solution, `behind_camera`
     for a solution that puts a seen feature behind a camera) and `failed_sample` (the last
@@ -248,7 +248,7 @@ def bundle_adjustment(
 
     def to_output(y):
         A, R_c, x_c, omega_s = _unpack(y, scale, a_known)
-        return AdaptiveOutput(omega_s=omega_s, A=A, R_c=R_c, x_c=x_c)
+        return StaticPointsOutput(omega_s=omega_s, A=A, R_c=R_c, x_c=x_c)
 
     def clean(x):
         if not jnp.issubdtype(x.dtype, jnp.floating):
@@ -423,7 +423,7 @@ def static_points_ekf(
     probability of the outlier gate on each feature's pixel pair (`ExtendedKalmanFilter`;
     `None`, the default: no gate).
 
-    **Returns:** a `Solution` like `bundle_adjustment`'s: `outputs` an `AdaptiveOutput`
+    **Returns:** a `Solution` like `bundle_adjustment`'s: `outputs` an `StaticPointsOutput`
     per sample (the filtered estimate after that sample), `result` (`diverged`: a feature
     estimated behind the camera; `nonfinite_state`; `nonfinite_measurement`),
     `failed_sample`, `diagnostics` the filter's covariances (N, d, d).
@@ -478,7 +478,9 @@ def static_points_ekf(
 
     def to_output(x):
         A = _A_from(x[:5] * scale)
-        return AdaptiveOutput(omega_s=x[11:].reshape(n, 3), A=A, R_c=so3_exp(x[5:8]), x_c=x[8:11])
+        return StaticPointsOutput(
+            omega_s=x[11:].reshape(n, 3), A=A, R_c=so3_exp(x[5:8]), x_c=x[8:11]
+        )
 
     outputs = raise_or_keep(result, jax.vmap(to_output)(sol.outputs.x), throw)
     return baseline_solution(stream.ts, outputs, result, failed, sol.outputs.P)

@@ -59,7 +59,7 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, all_finite, raise_or_keep
-from ..estimators import Solution, Stream, UIOOutput
+from ..estimators import MovingPointOutput, Solution, Stream
 from ..geometry import skew, so3_exp
 from ..kinematics import perspective_dynamics
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
@@ -131,7 +131,7 @@ def _check_stream(stream):
 
 def _output(m):
     x_hat = jnp.stack([m[0] / m[2], m[1] / m[2], 1.0 / m[2]])
-    return UIOOutput(x_hat=x_hat, position=m)
+    return MovingPointOutput(x_hat=x_hat, position=m)
 
 
 @final
@@ -179,7 +179,7 @@ def triangulate_point(
     solution (module docstring; the squared loss: the linear solution itself, unweighted);
     `throw` as for the estimators.
 
-    **Returns:** a `Solution` with `ts`, `outputs` a `UIOOutput` per frame (position in the
+    **Returns:** a `Solution` with `ts`, `outputs` a `MovingPointOutput` per frame (position in the
     current camera frame, in the units of the camera velocities; NaN during the warm-up,
     before the first window that determines a point in front of the camera), `result`
     (the first failure after the warm-up: a singular window, a refinement that failed (the
@@ -424,7 +424,7 @@ def moving_point_ekf(
     `gate`: the probability of the outlier gate on each frame's measured $y$
     (`ExtendedKalmanFilter`; `None`, the default: no gate).
 
-    **Returns:** a `Solution` with `outputs` a `UIOOutput` per frame (after its update),
+    **Returns:** a `Solution` with `outputs` a `MovingPointOutput` per frame (after its update),
     `result` (`diverged`: the inverse depth not positive; `nonfinite_measurement`;
     `nonfinite_state`), `failed_sample`, the covariances as `diagnostics`.
     """

@@ -40,7 +40,7 @@ class LMIInfeasibleError(ValueError):
 
 
 @dataclass(frozen=True)
-class UIODesign:
+class MovingPointDesign:
     """The result of `design_uio`: the LMI's `P`, the gains `K`, `Y`, and the observer
     matrices `E`, `M`, `N`, `L` (NumPy arrays), with the bound it was designed for and the
     largest eigenvalue of $Q$ of (3.6) (negative; with a velocity range, the largest over
@@ -50,7 +50,7 @@ class UIODesign:
     \\sum_j u_j A_{u,j}$ and $K(u) = K + \\sum_j u_j K_{u,j}$ (zeros for a fixed design);
     `N` is then $N(0)$, and `persistent` says which vertex inequality was used.
     `observer_fields()` gives the keyword arguments of
-    `MovingPointObserver` (`K`, `Y`, `A_u`, `K_u`, `P`)."""
+    `MovingPointEstimator` (`K`, `Y`, `A_u`, `K_u`, `P`)."""
 
     P: np.ndarray
     K: np.ndarray
@@ -69,7 +69,7 @@ class UIODesign:
 
     def observer_fields(self) -> dict:
         """`K`, `Y` (and for a velocity range `A_u`, `K_u`, `P`) as keyword arguments of
-        `visjax.estimators.MovingPointObserver`."""
+        `visjax.estimators.MovingPointEstimator`."""
         fields = {"K": self.K, "Y": self.Y}
         if self.A_u is not None:
             fields.update(A_u=self.A_u, K_u=self.K_u, P=self.P)
@@ -267,7 +267,7 @@ def design_uio(
     persistent: bool = False,
     depth_weight: float | None = None,
     Y=None,
-) -> UIODesign:
+) -> MovingPointDesign:
     """Observer gains $(K, Y)$ from the LMI of section 3.6 (Jang's thesis, eq. (3.6)).
 
     **Arguments:**
@@ -279,7 +279,7 @@ def design_uio(
       \\prec 0$ alone), e.g. a camera that only translates parallel to the image plane, with
       $A(u)$ the thesis' $A$ of the camera velocities.
     - `uub`: the UUB variant ($X_{11} + I_3$) for a second unknown input treated as a
-      bounded disturbance (`UIODesign.ultimate_bound`).
+      bounded disturbance (`MovingPointDesign.ultimate_bound`).
     - `alpha`: a decay rate $\\alpha \\ge 0$: $X_{11} + 2\\alpha P$ in place of $X_{11}$,
       i.e. $Q + 2\\alpha P \\prec 0$, so $\\dot V \\le -2\\alpha V$ for $V = e^TPe$ and
       $\\|e(t)\\| \\le \\sqrt{\\lambda_{\\max}(P)/\\lambda_{\\min}(P)}\\,\\|e(0)\\|
@@ -320,7 +320,7 @@ def design_uio(
       velocity, the cross terms of $V$ cancelling) large, and the depth converge faster
       under the same excitation (`convergence_rate`, `design_uio_for_motion`).
 
-    **Returns:** a `UIODesign` (`observer_fields()` for `MovingPointObserver`). Raises
+    **Returns:** a `MovingPointDesign` (`observer_fields()` for `MovingPointEstimator`). Raises
     `LMIInfeasibleError` (a `ValueError`) if the LMI is infeasible, with the largest
     feasible bound in the message for the fixed design.
     """
@@ -426,7 +426,7 @@ def _checked(
     K_u=None,
     u_list=None,
     persistent=False,
-) -> UIODesign:
+) -> MovingPointDesign:
     """Re-check a design in NumPy: M D = 0; for a fixed design N Hurwitz with real parts
     <= -alpha and Q of (3.6) (+ 2 alpha P) negative definite; for a velocity range the
     vertex inequalities."""
@@ -462,7 +462,7 @@ def _checked(
         raise LMIInfeasibleError(
             "the LMI solution fails the re-check in NumPy: " + "; ".join(problems)
         )
-    return UIODesign(
+    return MovingPointDesign(
         P,
         K,
         Y,
@@ -500,7 +500,7 @@ def max_lipschitz(A, C, D, *, uub: bool = False) -> float:
     return float(1.0 / (beta.value * (1.0 + 1e-4) + 1e-9))
 
 
-def convergence_rate(design: UIODesign, A, C, u_samples, dt: float) -> float:
+def convergence_rate(design: MovingPointDesign, A, C, u_samples, dt: float) -> float:
     """The exponential rate at which the estimation error decays over a planned camera
     motion: $-\\ln \\rho(\\Phi)/T$, with $\\Phi = \\prod_k \\exp(N(u_k)\\,dt)$ the
     transition matrix of $\\dot e = N(u(t)) e$ (eq. (3.5) with $\\bar f = 0$ and no
@@ -509,7 +509,7 @@ def convergence_rate(design: UIODesign, A, C, u_samples, dt: float) -> float:
     For a periodic motion sampled over one period this is the Floquet exponent (exact for
     the held samples); otherwise the average rate over the window.
 
-    **Arguments:** `design` a `UIODesign`; `A` (3, 3) the constant part of $A(u)$ it was
+    **Arguments:** `design` a `MovingPointDesign`; `A` (3, 3) the constant part of $A(u)$ it was
     designed for; `C` (2, 3); `u_samples` (n, 6); `dt` > 0.
     """
     from scipy.linalg import expm

@@ -1,11 +1,12 @@
 """The papers' observers and update laws, the contract they fulfil and the runner they share."""
 
+from .._util import renamed as _renamed
 from ._adaptive_ls import (
-    AdaptiveDiagnostics as AdaptiveDiagnostics,
-    AdaptiveOutput as AdaptiveOutput,
-    AdaptiveState as AdaptiveState,
-    PlatformMeasurement as PlatformMeasurement,
+    StaticPointsDiagnostics as StaticPointsDiagnostics,
     StaticPointsEstimator as StaticPointsEstimator,
+    StaticPointsMeasurement as StaticPointsMeasurement,
+    StaticPointsOutput as StaticPointsOutput,
+    StaticPointsState as StaticPointsState,
     pe_measure as pe_measure,
     platform_measurements as platform_measurements,
     static_points_stream as static_points_stream,
@@ -35,10 +36,10 @@ from ._base import (
 from ._filters import lowpass as lowpass, lowpass_delay as lowpass_delay
 from ._uio import (
     THESIS_A_U as THESIS_A_U,
-    MovingCameraMeasurement as MovingCameraMeasurement,
-    MovingPointObserver as MovingPointObserver,
-    UIOOutput as UIOOutput,
-    UIOState as UIOState,
+    MovingPointEstimator as MovingPointEstimator,
+    MovingPointMeasurement as MovingPointMeasurement,
+    MovingPointOutput as MovingPointOutput,
+    MovingPointState as MovingPointState,
     moving_point_innovation as moving_point_innovation,
     moving_point_stream as moving_point_stream,
     rank_condition as rank_condition,
@@ -65,3 +66,16 @@ from ._velocity import (
     velocity_measurements as velocity_measurements,
     velocity_stream as velocity_stream,
 )
+
+RENAMED = {
+    "UIOState": "MovingPointState",
+    "UIOOutput": "MovingPointOutput",
+    "MovingCameraMeasurement": "MovingPointMeasurement",
+    "MovingPointObserver": "MovingPointEstimator",
+    "AdaptiveState": "StaticPointsState",
+    "AdaptiveOutput": "StaticPointsOutput",
+    "AdaptiveDiagnostics": "StaticPointsDiagnostics",
+    "PlatformMeasurement": "StaticPointsMeasurement",
+}
+"""The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
+__getattr__ = _renamed("visjax.estimators", RENAMED, globals())

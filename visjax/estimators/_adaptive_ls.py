@@ -55,7 +55,7 @@ from ._base import AbstractJumpEstimator, Stream, checked_samples, reject_mask
 
 
 @final
-class PlatformMeasurement(eqx.Module):
+class StaticPointsMeasurement(eqx.Module):
     """One sample for the estimator of Nath et al.: the measured platform pose `R_b`, `x_b`,
     homogeneous pixels of the unknown (`p_s`, (n, 3)) and known (`p_c`, (m, 3)) features,
     the known features' regressors `W_x` (m, 3, 12), `Pi_x` (m, 4) of eq. (12), and the
@@ -91,7 +91,7 @@ def _known_regressors(R_b, x_b, omega_c):
     return jax.vmap(one)(R_b, x_b)
 
 
-def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
+def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> StaticPointsMeasurement:
     """Build the measurements of all samples at once (vmapped before the time loop).
 
     `R_b` (N, 3, 3), `x_b` (N, 3), pixels `p_s` (N, n, 2) and `p_c` (N, m, 2), known
@@ -118,7 +118,7 @@ def platform_measurements(R_b, x_b, p_s, p_c, omega_c) -> PlatformMeasurement:
     W_x, Pi_x = _known_regressors(R_b, x_b, omega_c)
     p_s, visible_s = _visible(p_s)
     p_c, visible_c = _visible(p_c)
-    return PlatformMeasurement(
+    return StaticPointsMeasurement(
         R_b=R_b,
         x_b=x_b,
         p_s=to_homogeneous(p_s),
@@ -203,7 +203,7 @@ def _project(tau, theta, normals, margin, Gamma):
 
 
 @final
-class AdaptiveState(eqx.Module):
+class StaticPointsState(eqx.Module):
     """The state of the two laws: `theta_c` (16,) the camera parameters; `info_c` (16, 16)
     $\\Gamma_\\varphi^{-1}$ (normalised, see the module docstring); `theta_s` (n, 4) the
     structure parameters; `info_s` (n, 4, 4) the diagonal blocks of $\\Gamma^{-1}$ (eq. (45):
@@ -217,7 +217,7 @@ class AdaptiveState(eqx.Module):
 
 
 @final
-class AdaptiveOutput(eqx.Module):
+class StaticPointsOutput(eqx.Module):
     """The unknown features' world positions, scale recovered (eqs. (50)-(51)), and the
     camera recovered from the camera-parameter estimate (the paper's footnote 3): the
     intrinsics `A` (pixels), the mounting `R_c`, `x_c` (eq. (5): a platform-frame point $q$
@@ -230,7 +230,7 @@ class AdaptiveOutput(eqx.Module):
 
 
 @final
-class AdaptiveDiagnostics(eqx.Module):
+class StaticPointsDiagnostics(eqx.Module):
     """Prediction errors (px) of the known (`p_tilde_c`) and unknown (`p_tilde_s`)
     features, NaN where the feature is not seen at that sample; predicted depths
     `depth_s`, `depth_c`; the minimum eigenvalue of $\\Gamma_\\varphi$; the reset count;
@@ -372,7 +372,7 @@ class StaticPointsEstimator(AbstractJumpEstimator):
         **Returns:** an `StaticPointsEstimator`. `ValueError` for a wrong shape or an
         unknown gain name.
         """
-        if not isinstance(stream, Stream) or not isinstance(stream.ys, PlatformMeasurement):
+        if not isinstance(stream, Stream) or not isinstance(stream.ys, StaticPointsMeasurement):
             raise ValueError("`stream` must be a Stream of `static_points_stream`.")
         A_nominal, R_c_nominal, x_c_nominal = (
             as_float(x) for x in (A_nominal, R_c_nominal, x_c_nominal)
@@ -441,12 +441,12 @@ class StaticPointsEstimator(AbstractJumpEstimator):
             ),
         )
 
-    def init(self, y0: PlatformMeasurement) -> AdaptiveState:
+    def init(self, y0: StaticPointsMeasurement) -> StaticPointsState:
         dtype = y0.p_s.dtype
         n = self.theta_s0.shape[0]
         info_c = jnp.eye(16, dtype=dtype) / self.eta0  # Gamma_phi(t0) = eta0 I
         info_s = jnp.broadcast_to(jnp.eye(4, dtype=dtype) / self.gamma_s0, (n, 4, 4))
-        return AdaptiveState(
+        return StaticPointsState(
             theta_c=self.theta_c0,
             info_c=info_c,
             theta_s=self.theta_s0,
@@ -454,7 +454,7 @@ class StaticPointsEstimator(AbstractJumpEstimator):
             resets=jnp.zeros((), dtype),
         )
 
-    def _signals(self, state: AdaptiveState, y: PlatformMeasurement):
+    def _signals(self, state: StaticPointsState, y: StaticPointsMeasurement):
         """Prediction errors and regressors in normalised pixels $Np$; the rows of a feature
         not seen at this sample are zero in `W_c` and both prediction errors."""
         theta_c, theta_s = state.theta_c, state.theta_s
@@ -474,7 +474,7 @@ class StaticPointsEstimator(AbstractJumpEstimator):
         W_bar = W[None, :, :] - p_hat_s[:, :, None] * Pi[None, :, :]  # blocks of eq. (22)
         return p_tilde_c, W_c, p_tilde_s, W_bar, Pi[0], depth_c, depth_s
 
-    def max_stable_dt(self, y: PlatformMeasurement):
+    def max_stable_dt(self, y: StaticPointsMeasurement):
         state = self.init(y)
         _, W_c, _, W_bar, _, depth_c, depth_s = self._signals(state, y)
         WD = W_c * self.D[None, :]
@@ -486,7 +486,9 @@ class StaticPointsEstimator(AbstractJumpEstimator):
         bound_s = _ls_step_bound(jnp.max(rate_s), self.alpha, jnp.mean(depth_s))
         return jax.lax.stop_gradient(jnp.minimum(bound_c, bound_s))
 
-    def vector_field(self, t, state: AdaptiveState, y: PlatformMeasurement) -> AdaptiveState:
+    def vector_field(
+        self, t, state: StaticPointsState, y: StaticPointsMeasurement
+    ) -> StaticPointsState:
         theta_c, info_c, theta_s, info_s = state.theta_c, state.info_c, state.theta_s, state.info_s
         p_tilde_c, W_c, p_tilde_s, W_bar, Pi_hat, _, _ = self._signals(state, y)
         WD = W_c * self.D[None, :]
@@ -505,7 +507,7 @@ class StaticPointsEstimator(AbstractJumpEstimator):
         )
         d_info_s = 2.0 * jnp.einsum("nki,nkj->nij", W_bar, W_bar)  # eq. (45)
         d_info_s = y.visible_s[:, None, None] * d_info_s
-        return AdaptiveState(
+        return StaticPointsState(
             theta_c=tau_c,
             info_c=d_info_c,
             theta_s=tau_s,
@@ -513,7 +515,7 @@ class StaticPointsEstimator(AbstractJumpEstimator):
             resets=jnp.zeros_like(state.resets),
         )
 
-    def jump(self, state: AdaptiveState, y) -> AdaptiveState:
+    def jump(self, state: StaticPointsState, y) -> StaticPointsState:
         """Covariance resetting of eq. (39): $\\Gamma_\\varphi \\to \\eta_0 I$ when its minimum
         eigenvalue reaches $\\eta_1$ (the largest eigenvalue of `info_c` reaches $1/\\eta_1$)."""
         lam_max = jnp.linalg.eigvalsh(jax.lax.stop_gradient(state.info_c))[-1]
@@ -525,20 +527,22 @@ class StaticPointsEstimator(AbstractJumpEstimator):
             (info_c, state.resets + reset.astype(state.resets.dtype)),
         )
 
-    def camera(self, state: AdaptiveState):
+    def camera(self, state: StaticPointsState):
         """$A$ (pixels), $R_c$, $x_c$ from the camera-parameter estimate (the paper's
         footnote 3, `geometry.camera_from_parameters`): the estimate is of $A' = NA$, so
         $A = N^{-1}A'$. Exact when `state.theta_c` is the truth (at any scale)."""
         A_n, R_c, x_c = camera_from_parameters(state.theta_c[:12])
         return jnp.linalg.solve(self.N, A_n), R_c, x_c
 
-    def output(self, t, state: AdaptiveState, y) -> AdaptiveOutput:
+    def output(self, t, state: StaticPointsState, y) -> StaticPointsOutput:
         theta_s = state.theta_s
         lam = theta_s[:, 3]  # eq. (50)
         A, R_c, x_c = self.camera(state)
-        return AdaptiveOutput(omega_s=theta_s[:, :3] / lam[:, None], A=A, R_c=R_c, x_c=x_c)  # (51)
+        return StaticPointsOutput(
+            omega_s=theta_s[:, :3] / lam[:, None], A=A, R_c=R_c, x_c=x_c
+        )  # (51)
 
-    def diagnostics(self, t, state: AdaptiveState, y) -> AdaptiveDiagnostics:
+    def diagnostics(self, t, state: StaticPointsState, y) -> StaticPointsDiagnostics:
         p_tilde_c, _, p_tilde_s, W_bar, _, depth_c, depth_s = self._signals(state, y)
         lam = jnp.linalg.eigvalsh(jax.lax.stop_gradient(state.info_c))[-1]
         N_inv = jnp.linalg.inv(self.N)
@@ -549,7 +553,7 @@ class StaticPointsEstimator(AbstractJumpEstimator):
 
         t1 = state.theta_c[:12]
         t1 = jnp.concatenate([(N_inv @ t1[:9].reshape(3, 3)).reshape(9), N_inv @ t1[9:]])
-        return AdaptiveDiagnostics(
+        return StaticPointsDiagnostics(
             p_tilde_c=pixels(p_tilde_c, y.visible_c),
             p_tilde_s=pixels(p_tilde_s, y.visible_s),
             depth_s=depth_s,
@@ -561,7 +565,7 @@ class StaticPointsEstimator(AbstractJumpEstimator):
             * jnp.einsum("nki,nkj->nij", W_bar, W_bar),  # integrand of (49)
         )
 
-    def valid(self, state: AdaptiveState, y: PlatformMeasurement):
+    def valid(self, state: StaticPointsState, y: StaticPointsMeasurement):
         depth_c = y.Pi_x @ state.theta_c[12:]
         _, Pi = unknown_feature_regressors(y.R_b, y.x_b, state.theta_c[:12], state.theta_c[12:])
         depth_s = state.theta_s @ Pi[0]

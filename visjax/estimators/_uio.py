@@ -53,7 +53,7 @@ def _thesis_A_u() -> np.ndarray:
 
 THESIS_A_U = _thesis_A_u()
 """(6, 3, 3): the slopes $A_j = \\partial A / \\partial u_j$ of the thesis' $A(u)$; pass it as
-`MovingPointObserver(A=np.zeros((3, 3)), A_u=THESIS_A_U, ...)` for $A$ from the measured
+`MovingPointEstimator(A=np.zeros((3, 3)), A_u=THESIS_A_U, ...)` for $A$ from the measured
 camera velocities."""
 
 
@@ -143,7 +143,7 @@ def rank_condition(A, C, D, *, tol: float = 1e-9) -> bool:
 
 
 @final
-class MovingCameraMeasurement(eqx.Module):
+class MovingPointMeasurement(eqx.Module):
     """One sample (or, in a `Stream`, all samples: a leading axis) for the UIO: `y` (2,) the
     point's normalized image coordinates
     $[x_1, x_2]$ (eq. (3.1)); `u` (6,) the camera velocities $[v_c, \\omega]$ (camera basis)."""
@@ -153,14 +153,14 @@ class MovingCameraMeasurement(eqx.Module):
 
 
 @final
-class UIOState(eqx.Module):
+class MovingPointState(eqx.Module):
     """The observer state $z$ of eq. (3.5); $\\hat x = z - E y$."""
 
     z: Float[Array, "3"]
 
 
 @final
-class UIOOutput(eqx.Module):
+class MovingPointOutput(eqx.Module):
     """$\\hat x = [\\hat x_1, \\hat x_2, \\hat x_3]$ ($[X/Z, Y/Z, 1/Z]$) and the point's
     position in the camera frame, $[\\hat x_1/\\hat x_3, \\hat x_2/\\hat x_3, 1/\\hat x_3]$ (in
     the units of the camera velocities)."""
@@ -170,12 +170,12 @@ class UIOOutput(eqx.Module):
 
 
 @final
-class MovingPointObserver(AbstractEstimator):
+class MovingPointEstimator(AbstractEstimator):
     """The nonlinear unknown input observer of eq. (3.5).
 
     $\\dot z = N z + L y + M \\bar f(\\hat x, u) + M g(y, u)$, $\\hat x = z - E y$, with
     $\\bar f(x, u) = f(x, u) - A x$ (eq. (3.2)) and $E, M, N, L$ from `uio_matrices`.
-    Measurements are `MovingCameraMeasurement`s (`moving_point_stream`).
+    Measurements are `MovingPointMeasurement`s (`moving_point_stream`).
 
     **The system.** $\\dot x = A x + \\bar f(x, u) + g(y, u) + D_1 d_1 + D_2 d_2$ (eqs. (3.1),
     (3.2)). $D_1$ (`D`) is decoupled exactly ($M D_1 = 0$, eq. (3.5)); $D_2$ (`D2`, default
@@ -355,29 +355,33 @@ class MovingPointObserver(AbstractEstimator):
         per = jnp.where(a2 > 0, -2.0 * jnp.real(lam) / jnp.where(a2 > 0, a2, 1.0), jnp.inf)
         return jnp.min(per)
 
-    def init(self, y0: MovingCameraMeasurement) -> UIOState:
+    def init(self, y0: MovingPointMeasurement) -> MovingPointState:
         E, _, _, _ = self._matrices()
         x3 = jnp.reshape(self.x3_guess, (1,)).astype(y0.y.dtype)
         x_hat = jnp.concatenate([y0.y, x3])
-        return UIOState(z=x_hat + E @ y0.y)  # z = x_hat + E y
+        return MovingPointState(z=x_hat + E @ y0.y)  # z = x_hat + E y
 
-    def _x_hat(self, state: UIOState, y):
+    def _x_hat(self, state: MovingPointState, y):
         E, _, _, _ = self._matrices()
         return state.z - E @ y
 
-    def vector_field(self, t, state: UIOState, meas: MovingCameraMeasurement) -> UIOState:
+    def vector_field(
+        self, t, state: MovingPointState, meas: MovingPointMeasurement
+    ) -> MovingPointState:
         y, u = meas.y, meas.u
         E, M, N, L = self.matrices_at(u)  # N(u), L(u): the constant ones when A_u = K_u = 0
         x_hat = state.z - E @ y
         f_bar = camera_term(x_hat, u) - self.A_of(u) @ x_hat  # eq. (3.2)
-        return UIOState(z=N @ state.z + L @ y + M @ f_bar + M @ known_input_term(y, u))  # (3.5)
+        return MovingPointState(
+            z=N @ state.z + L @ y + M @ f_bar + M @ known_input_term(y, u)
+        )  # (3.5)
 
-    def output(self, t, state: UIOState, meas: MovingCameraMeasurement) -> UIOOutput:
+    def output(self, t, state: MovingPointState, meas: MovingPointMeasurement) -> MovingPointOutput:
         x_hat = self._x_hat(state, meas.y)
         position = jnp.stack([x_hat[0], x_hat[1], jnp.ones_like(x_hat[2])]) / x_hat[2]
-        return UIOOutput(x_hat=x_hat, position=position)
+        return MovingPointOutput(x_hat=x_hat, position=position)
 
-    def valid(self, state: UIOState, meas: MovingCameraMeasurement):
+    def valid(self, state: MovingPointState, meas: MovingPointMeasurement):
         x_hat = self._x_hat(state, meas.y)
         ok = (x_hat[2] > 0) & (jnp.max(jnp.abs(x_hat)) < self.bound)
         return ok & (~self.time_varying | self._lyapunov_ok(meas.u))
@@ -441,7 +445,7 @@ def moving_point_stream(
         y = _normalized_held(ts, marked, K_c, "hold" if dropped == "stop" else dropped)
         if dropped == "stop":  # a frame that is NaN without being rejected still stops
             y = jnp.where(reject[:, None], y, pixel_to_normalized(pixels, K_c))
-    stream = Stream(ts=ts, ys=MovingCameraMeasurement(y=y, u=velocities), truth=truth)
+    stream = Stream(ts=ts, ys=MovingPointMeasurement(y=y, u=velocities), truth=truth)
     return checked_samples(stream, "moving_point_stream", throw)
 
 

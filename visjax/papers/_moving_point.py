@@ -401,7 +401,7 @@ def moving_point_observer_for_data(data):
     `info` a dict (`depth_guess_m`, `D`, `design`, `unmodelled_motion`).
     """
     from ..design import design_uio_for_motion
-    from ..estimators import MovingPointObserver
+    from ..estimators import MovingPointEstimator
 
     t = np.asarray(data.t, float)
     u = np.stack(
@@ -415,7 +415,7 @@ def moving_point_observer_for_data(data):
     frame_dt = float(np.median(np.diff(t)))
     design, rate = design_uio_for_motion(np.zeros((3, 3)), C, D, u_range, u[:250], frame_dt)
     depth_guess = 1.0 if data.depth_guess is None else float(data.depth_guess)
-    observer = MovingPointObserver(
+    observer = MovingPointEstimator(
         A=np.zeros((3, 3)), D=D, x3_guess=1.0 / depth_guess, **design.observer_fields()
     )
     info = {

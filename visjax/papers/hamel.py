@@ -59,7 +59,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS
-from .._util import number_text
+from .._util import number_text, renamed
 from ..estimators import (
     AbstractJumpEstimator,
     SaveAt,
@@ -125,7 +125,7 @@ def homography_innovation(
     return jnp.einsum("ni,nj->ij", proj, e)
 
 
-class HomographyObserver(AbstractJumpEstimator):
+class HomographyEstimator(AbstractJumpEstimator):
     """The observer of Hamel et al. (module docstring): `k_P` the gain of the innovation
     (1/s), `p_ref` (n, 3) the reference unit directions (n >= 4), `H0` (3, 3) the initial
     estimate (default the identity; brought to SL(3)), `k_I` the gain of the integral term
@@ -446,7 +446,7 @@ class HomographyProblem(AbstractProblem):
         pixels, reference = inputs["pixels"], inputs["reference"]
         if method in ("estimator", "gyro"):
             A = sc.A if method == "estimator" else jax.vmap(skew)(sc.omega)
-            observer = HomographyObserver(
+            observer = HomographyEstimator(
                 k_P=params["k_P"],
                 p_ref=unit_bearings(reference, sc.K),
                 k_I=params["k_I"] if method == "gyro" else 0.0,
@@ -606,7 +606,7 @@ class VelocityFrontEndProblem(AbstractProblem):
         pixels = inputs["pixels"]
         K = self.base.A
         p_ref = unit_bearings(self.base.camera(inputs).p_ref, K)
-        observer = HomographyObserver(k_P=params["k_P"], p_ref=p_ref, k_I=params["k_I"])
+        observer = HomographyEstimator(k_P=params["k_P"], p_ref=p_ref, k_I=params["k_I"])
         zero = jnp.zeros((pixels.shape[0], 3, 3), pixels.dtype)
         stream = homography_stream(self.base.ts, pixels, zero, K, throw=False)
         sol = run(observer, stream, saveat=SaveAt(outputs=True), throw=False)
@@ -766,3 +766,8 @@ def reproduce_homography(
         )
         for m, v in summary["methods"].items()
     ]
+
+
+RENAMED = {"HomographyObserver": "HomographyEstimator"}
+"""The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
+__getattr__ = renamed("visjax.papers.hamel", RENAMED, globals())

@@ -50,7 +50,7 @@ from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._results import RESULTS, result_names
 from ..estimators import (
-    MovingPointObserver,
+    MovingPointEstimator,
     Stream,
     moving_point_stream,
     run,
@@ -293,10 +293,10 @@ def _held(pixels, velocities, k):
     return pixels[k], velocities[k]
 
 
-def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> MovingPointObserver:
+def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> MovingPointEstimator:
     """The UIO of a thesis set, with the thesis' gains unless `K`, `Y` are given."""
     s = SETS[set_name]
-    return MovingPointObserver(
+    return MovingPointEstimator(
         A=s.A,
         D=jnp.array(s.D, float)[:, None],
         K=s.K if K is None else K,

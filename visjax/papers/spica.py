@@ -48,7 +48,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS
-from .._util import number_text
+from .._util import number_text, renamed
 from ..baselines import AbstractEKFModel, cauchy, extended_kalman_filter, triangulate_point
 from ..estimators import (
     AbstractEstimator,
@@ -130,7 +130,7 @@ def point_depth_rate(
     return jnp.dot(s, v) * chi**2
 
 
-class PointDepthObserver(AbstractEstimator):
+class PointDepthEstimator(AbstractEstimator):
     """The observer of Spica et al. for `n` static points at once (module docstring):
     `alpha` ($\\alpha > 0$, the inverse depth's gain), `h` ($H = h I$, $h > 0$, 1/s) and
     `chi0` (the initial inverse-depth estimate of every point, 1/m); `projection`
@@ -222,7 +222,7 @@ def point_depth_stream(
         raise ValueError(f"`pixels` must have shape (N, n, 2) with N = {ts.shape[0]}.")
     if twists.shape != (ts.shape[0], 6):
         raise ValueError(f"`twists` must have shape ({ts.shape[0]}, 6); got {twists.shape}.")
-    if projection not in PointDepthObserver.dims:
+    if projection not in PointDepthEstimator.dims:
         raise ValueError(f'`projection` must be "planar" or "spherical"; got {projection!r}.')
     m = pixel_to_normalized(pixels, A)
     if projection == "spherical":
@@ -416,7 +416,7 @@ class PointDepthProblem(AbstractProblem):
     def solve(self, method, params, inputs, *, outputs=False):
         sc = self.scene
         if method == "estimator":
-            observer = PointDepthObserver(
+            observer = PointDepthEstimator(
                 alpha=params["alpha"],
                 h=params["h"],
                 chi0=params["chi0"],
@@ -573,7 +573,7 @@ def point_depth_problem(
     `"spherical"`; `window_s` the least-squares baseline's window (s); `robust`: the
     baselines' robust settings (`PointDepthProblem`)."""
     projection = variant or "planar"
-    if projection not in PointDepthObserver.dims:
+    if projection not in PointDepthEstimator.dims:
         raise ValueError(f'the variant must be "planar" or "spherical"; got {variant!r}.')
     if not noise_px >= 0:
         raise ValueError(f"`noise_px` must be non-negative; got {noise_px!r}.")
@@ -791,7 +791,7 @@ class ActivePointDepth(AbstractJumpEstimator):
     `vector_field` under `PointDepthMeasurement(s, (v, w))`), with $\\omega$ =
     `servo_angular_velocity` from the held $s$ and the current estimate.
 
-    **Fields:** `observer` a `PointDepthObserver` (its `projection` is the loop's; its
+    **Fields:** `observer` a `PointDepthEstimator` (its `projection` is the loop's; its
     `chi0` the initial estimate of every point); `points0` (n, 3) the true points at the
     start (camera frame, m); `v0` (3,) the initial linear velocity (m/s); `sigma_des` the
     desired $\\sigma_d$ (1/s); `k_sigma` (1/s) the rate of $\\sigma^2$'s first-order
@@ -802,7 +802,7 @@ class ActivePointDepth(AbstractJumpEstimator):
     0$), $\\sigma^2 > 0$ at the start (`v0` must move across a line of sight). Valid:
     every $\\hat\\chi > 0$ and every true point in front."""
 
-    observer: PointDepthObserver
+    observer: PointDepthEstimator
     points0: Float[Array, "n 3"] = eqx.field(converter=jnp.asarray)
     v0: Float[Array, "3"] = eqx.field(converter=jnp.asarray)
     sigma_des: Float[Array, ""] = eqx.field(converter=jnp.asarray)
@@ -1029,7 +1029,7 @@ def second_order_transient(
     0.05 m/s against 0.16), $\\Omega$'s direction constant and the $f_u$ difference nil
     (both hold to first order while the point stays near the centre)."""
     chi0 = 1.0 / float(point[2] if projection == "planar" else jnp.linalg.norm(jnp.asarray(point)))
-    observer = PointDepthObserver(
+    observer = PointDepthEstimator(
         alpha=alpha,
         h=2 * zeta * jnp.asarray(sigma_des),
         chi0=(1 - chi0_error) * chi0,
@@ -1146,3 +1146,8 @@ def reproduce_point_depth(
             )
         )
     return rows
+
+
+RENAMED = {"PointDepthObserver": "PointDepthEstimator"}
+"""The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
+__getattr__ = renamed("visjax.papers.spica", RENAMED, globals())
