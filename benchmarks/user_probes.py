@@ -811,7 +811,7 @@ def _foreign(fmt, command):
     return build
 
 
-FORMAT_NAME = {"v": "velocity", "s": "structure", "e": "euclidean"}
+FORMAT_NAME = {"v": "velocity", "s": "moving_point", "e": "static_points"}
 for fmt, command in (("s", "velocity"), ("v", "static_points"), ("e", "moving_point")):
     name = f"{command}_given_a_{FORMAT_NAME[fmt]}_file"
     PROBES.append(Probe(name, "wrong_format", command_probe(_foreign(fmt, command))))

@@ -53,7 +53,7 @@ def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatc
     assert main(["reproduce", "--quick", "--quiet", "--format", "svg", "--out", str(out)]) == 0
     kinds = check_outputs(out)
     assert sorted(kinds.values()) == sorted(
-        ["reproduce", "velocity", "geometry", "structure", "euclidean", "testbed"]
+        ["reproduce", "velocity", "geometry", "moving_point", "static_points", "testbed"]
         + ["point_depth", "homography"]
     )
     # the settings name the folder the user asked for, not the staging folder written first

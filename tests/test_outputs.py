@@ -17,6 +17,7 @@ from visjax.io import (
     COMMON,
     SUMMARIES,
     TABLES,
+    command_summary,
     read_summary,
     schema_markdown,
     validate_summary,
@@ -39,8 +40,8 @@ def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
         "summary.json": "reproduce",
         "velocity/summary.json": "velocity",
         "geometry/summary.json": "geometry",
-        "structure/summary.json": "structure",
-        "euclidean/summary.json": "euclidean",
+        "moving_point/summary.json": "moving_point",
+        "static_points/summary.json": "static_points",
         "testbed/summary.json": "testbed",
         "point_depth/summary.json": "point_depth",
         "homography/summary.json": "homography",
@@ -51,8 +52,8 @@ def test_every_output_of_reproduce_quick_loads_with_its_schema(results):
     assert pngs == pdfs and len(pngs) >= 5
     # every set's trajectory saved, with the camera-velocity figure of the thesis
     for name in ("I.1", "I.2", "I.3", "I.4", "II.1", "II.2", "II.3"):
-        assert (results / "structure" / f"estimate_{name}.npz").is_file()
-        assert (results / "structure" / f"camera_velocity_{name}.png").is_file()
+        assert (results / "moving_point" / f"estimate_{name}.npz").is_file()
+        assert (results / "moving_point" / f"camera_velocity_{name}.png").is_file()
 
 
 @pytest.mark.slow
@@ -82,14 +83,14 @@ def test_the_reproduce_table_holds_numbers(results):
         np.sqrt(np.mean(err[inside] ** 2, axis=0)), velocity["rms_window"], rtol=1e-12
     )
     # the structure table equals its summary
-    structure = read_summary(results / "structure" / "summary.json")
-    sets = pd.read_parquet(results / "structure" / "sets.parquet")
+    structure = read_summary(results / "moving_point" / "summary.json")
+    sets = pd.read_parquet(results / "moving_point" / "sets.parquet")
     for name, record in structure["sets"].items():
         rows = sets[sets["set"] == name].sort_values("axis")
         np.testing.assert_allclose(rows["rms_m"], record["rms"], rtol=1e-12)
 
 
-def _valid(kind="euclidean"):
+def _valid(kind="static_points"):
     body = {
         "final_position_error_m": [0.001, float("nan")],
         "duration_s": 1.0,
@@ -131,6 +132,12 @@ def test_schema_checks_refuse_what_is_not_documented(tmp_path):
         validate_summary({**_valid(), "kind": "nonsense"})
     with pytest.raises(ValueError, match="'seed' must be int\\|null"):
         validate_summary({**_valid(), "seed": 1.5})
+    # a kind of visjax 0.3: read as the new one, with a warning; never written
+    (tmp_path / "old.json").write_text(json.dumps(_valid("euclidean")))
+    with pytest.warns(FutureWarning, match="'euclidean' of visjax 0.3 is now 'static_points'"):
+        assert read_summary(tmp_path / "old.json")["covariance_resets"] == 3
+    with pytest.raises(ValueError, match="`kind` must be one of"):
+        command_summary("structure", {}, settings={}, seed=None, started=0.0)
 
 
 def test_the_schemas_are_documented():

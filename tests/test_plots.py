@@ -39,7 +39,7 @@ def _velocity(seeds=None, truth=True, **kw):
 
 def _structure(seeds=None, truth=True, **kw):
     t, p, est = _trajectory(d=3, seeds=seeds)
-    return plots.plot_structure(t, p + 2.0 if truth else None, est + 2.0, **kw)
+    return plots.plot_moving_point(t, p + 2.0 if truth else None, est + 2.0, **kw)
 
 
 def _camera_velocity(**kw):
@@ -83,7 +83,7 @@ def _euclidean_run(seeds=None, n=3, m=4):
 
 
 def _euclidean(seeds=None, **kw):
-    return plots.plot_euclidean(_euclidean_run(seeds), **kw)
+    return plots.plot_static_points(_euclidean_run(seeds), **kw)
 
 
 def _features(seeds=None, truth=True, **kw):
@@ -219,10 +219,10 @@ def test_every_plot_function_is_exercised():
     public = {name for name in dir(plots) if name.startswith("plot_")}
     used = {
         "plot_velocity",
-        "plot_structure",
+        "plot_moving_point",
         "plot_camera_velocity",
         "plot_testbed",
-        "plot_euclidean",
+        "plot_static_points",
         "plot_feature_estimates",
         "plot_geometry",
         "plot_comparison",

@@ -5,10 +5,10 @@ import importlib
 
 import pytest
 
-from visjax import design, estimators
-from visjax.papers import hamel, spica
+from visjax import design, estimators, plots
+from visjax.papers import hamel, jang, nath, spica
 
-MODULES = (estimators, design, spica, hamel)
+MODULES = (estimators, design, spica, hamel, jang, nath, plots)
 CASES = [(m, old, new) for m in MODULES for old, new in m.RENAMED.items()]
 
 

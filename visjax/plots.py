@@ -25,7 +25,7 @@ Conventions, shared by every `plot_*` function:
   parentheses, `"... (m)"`, is shown as `"... [m]"`. Quantities of different units are never
   on one axis (the geometry figure: degrees and relative errors on separate panels).
 - **Spread over seeds.** The functions that draw estimation errors (`plot_velocity`,
-  `plot_structure`, `plot_feature_estimates`, `plot_euclidean`, and `plot_comparison`'s
+  `plot_moving_point`, `plot_feature_estimates`, `plot_static_points`, and `plot_comparison`'s
   `errors`) take estimates with an extra leading seed axis, (S, N, d) instead of (N, d): then
   each line is the median over the S seeds, with the 10-90 % band over seeds shaded in its
   colour; the truth may be (N, d) (the same for every seed) or (S, N, d).
@@ -363,7 +363,7 @@ def plot_velocity(
 # Jang's thesis: structure of a moving point seen by a moving camera
 
 
-def plot_structure(
+def plot_moving_point(
     ts, position, estimate, *, title=None, path=None, max_points=2000, formats=("png",)
 ):
     """Like Figs. 5-7 and 5-8 of Jang's thesis: actual (black, dashed, on top) and estimated
@@ -521,13 +521,13 @@ def _feature_errors(est, truth):
     return np.linalg.norm(est - truth, axis=-1)
 
 
-def plot_euclidean(run, *, title=None, path=None, max_points=2000, formats=("png",)):
+def plot_static_points(run, *, title=None, path=None, max_points=2000, formats=("png",)):
     """Nath et al. on their simulation: each unknown feature's estimated world coordinates
     (solid, one colour per feature) against the truth (black, dashed, on top), the position
     error per feature [m] and the largest prediction error of both laws [px] (log axes), and
     the PE measure of eq. (49) [-].
 
-    **Arguments:** `run` a `visjax.papers.nath.EuclideanRun` (`ts` (N,), `omega_s`
+    **Arguments:** `run` a `visjax.papers.nath.StaticPointsRun` (`ts` (N,), `omega_s`
     (N, n, 3), `omega_true` (n, 3), `p_tilde_c` (N, m), `p_tilde_s` (N, n), `pe` (N, n)), or
     one whose arrays have a leading seed axis (S, ...) (`omega_true` (n, 3) or (S, n, 3)):
     then the median and the 10-90 % band over seeds. `max_points`, `title`, `path`, `formats`
@@ -964,3 +964,18 @@ def plot_tune_history(history, *, label=None, title=None, path=None, formats=("p
         ax.set_ylabel(_unit_label(label) if label else "training loss [-]")
         ax.grid(True, which="major", alpha=0.3)
         return _finish(fig, title, path, formats)
+
+
+RENAMED = {"plot_structure": "plot_moving_point", "plot_euclidean": "plot_static_points"}
+"""The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
+
+
+def __getattr__(name: str):
+    if name in RENAMED:  # this module imports no other visjax module: `_util.renamed` inline
+        warnings.warn(
+            f"visjax.plots.{name} is now visjax.plots.{RENAMED[name]}: the old name will go",
+            FutureWarning,
+            stacklevel=2,
+        )
+        return globals()[RENAMED[name]]
+    raise AttributeError(f"module 'visjax.plots' has no attribute {name!r}")

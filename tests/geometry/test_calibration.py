@@ -10,8 +10,8 @@ from visjax.geometry import camera_matrix, camera_matrix_lstsq
 from visjax.papers.jang import (
     KC_REFINED,
     KC_TOOLBOX,
+    moving_point_experiment,
     scenario as moving_camera_scenario,
-    structure_experiment,
 )
 
 
@@ -51,7 +51,7 @@ def test_refined_camera_matrix_reduces_the_position_error():
     # x1 spans little in set I.1 (v_cx = 0.3 cm/s), so f is the loosest parameter
     np.testing.assert_allclose(theta, [551.9794, 737.5125, 304.0282, 331.5052], rtol=1e-2)
     Kc_refined = np.asarray(camera_matrix(theta))
-    nominal = structure_experiment("I.2", 20.0, noise_px=0.1, Kc_observer=KC_TOOLBOX)
-    refined = structure_experiment("I.2", 20.0, noise_px=0.1, Kc_observer=Kc_refined)
+    nominal = moving_point_experiment("I.2", 20.0, noise_px=0.1, Kc_observer=KC_TOOLBOX)
+    refined = moving_point_experiment("I.2", 20.0, noise_px=0.1, Kc_observer=Kc_refined)
     assert refined.rms[1] < 0.6 * nominal.rms[1]  # y
     assert refined.rms[2] < nominal.rms[2]  # z

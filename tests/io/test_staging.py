@@ -11,9 +11,9 @@ from visjax.io._staging import MANIFEST, OutputConflictError
 
 
 def _summary(out: str) -> dict:
-    """A valid `euclidean` summary whose settings name `out`."""
+    """A valid `static_points` summary whose settings name `out`."""
     return {
-        "kind": "euclidean",
+        "kind": "static_points",
         "visjax_version": __version__,
         "jax_version": "0",
         "created_utc": "2026-01-01T00:00:00+00:00",

@@ -53,11 +53,11 @@ def test_command_summary_checks_its_schema_and_writes_it(tmp_path):
     }
     started = time.perf_counter()
     s = command_summary(
-        "euclidean", body, settings={"out": tmp_path}, seed=None, started=started, out=tmp_path
+        "static_points", body, settings={"out": tmp_path}, seed=None, started=started, out=tmp_path
     )
     assert s["final_position_error_m"] == [0.001, None] and s["settings"]["out"] == str(tmp_path)
     assert 0.0 <= s["wall_time_s"] < 60.0
     assert json.loads((tmp_path / "summary.json").read_text()) == s
     with pytest.raises(ValueError, match="covariance_resets"):
-        command_summary("euclidean", {**body, "covariance_resets": "3"}, settings={}, seed=None,
+        command_summary("static_points", {**body, "covariance_resets": "3"}, settings={}, seed=None,
                         started=started)  # fmt: skip

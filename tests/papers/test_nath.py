@@ -10,17 +10,17 @@ import pytest
 from visjax import RESULTS
 from visjax.estimators import SaveAt, platform_measurements, run, static_points_stream
 from visjax.papers.nath import (
-    euclidean_experiment,
     final_errors,
     initial_estimator,
     scenario as uncalibrated_scenario,
+    static_points_experiment,
     stream,
 )
 
 
 @pytest.fixture(scope="module")
 def runs():
-    return {exc: euclidean_experiment(20.0, exciting=exc) for exc in (True, False)}
+    return {exc: static_points_experiment(20.0, exciting=exc) for exc in (True, False)}
 
 
 @pytest.mark.slow  # the simulation's 20 s at 1 kHz, twice: product scale

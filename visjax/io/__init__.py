@@ -32,6 +32,7 @@ from ._outputs import (
     ARRAYS as ARRAYS,
     COMMON as COMMON,
     READ_ONLY_KINDS as READ_ONLY_KINDS,
+    RENAMED_KINDS as RENAMED_KINDS,
     SUMMARIES as SUMMARIES,
     TABLES as TABLES,
     finite_or_null as finite_or_null,

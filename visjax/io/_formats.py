@@ -686,7 +686,7 @@ class MovingPointData(_Format):
     time_unit: str | None = None
 
     REQUIRED = ("t", "pixels", "A", "camera_t", "camera_velocity", "D")
-    NAME = "structure"
+    NAME = "moving_point"
 
     def validate(self) -> None:
         self._shape("t", (None,))
@@ -751,7 +751,7 @@ class StaticPointsData(_Format):
         "R_c_nominal",
         "x_c_nominal",
     )
-    NAME = "euclidean"
+    NAME = "static_points"
 
     def validate(self) -> None:
         self._shape("t", (None,))

@@ -113,7 +113,7 @@ SUMMARIES = {
         "dropped_fraction?": _DROPPED,
         "failed_sample?": _FAILED_SAMPLE,
     },
-    "structure": {
+    "moving_point": {
         "duration_s": ("float", "simulated time per set, s"),
         "noise_px": ("float", "pixel noise sigma, px"),
         "sets": (
@@ -151,7 +151,7 @@ SUMMARIES = {
         "dropped_fraction?": _DROPPED,
         "failed_sample?": _FAILED_SAMPLE,
     },
-    "euclidean": {
+    "static_points": {
         "final_position_error_m": ("list[float]", "per unknown feature, at the end, m"),
         "duration_s": ("float", "simulated time, s"),
         "noise_px": ("float", "pixel noise sigma, px"),
@@ -338,7 +338,7 @@ TABLES = {
         "n_star_deg": "float",
         "alpha_rel": "float",
     },
-    "structure/sets.parquet": {
+    "moving_point/sets.parquet": {
         "set": "str",
         "axis": "str",
         "rms_m": "float",
@@ -377,12 +377,12 @@ ARRAYS = {
         "(S, N, 6) with `--seeds` S",
         "velocity": "(N, 6) the true velocity",
     },
-    "structure/estimate_<set>.npz": {
+    "moving_point/estimate_<set>.npz": {
         "t": "(N,) s",
         "position": "(N, 3) the true point in the camera frame, m",
         "estimate": "(N, 3) the observer's estimate, m; (S, N, 3) with `--seeds` S",
     },
-    "euclidean/estimate.npz": {
+    "static_points/estimate.npz": {
         "t": "(M,) s",
         "features": "(M, n, 3) the estimated unknown features, m; (S, M, n, 3) with `--seeds` S",
         "truth": "(n, 3) their true positions, m",
@@ -416,6 +416,7 @@ def validate_summary(summary: dict) -> dict:
     if not isinstance(summary, dict):
         raise ValueError(f"a summary is a JSON object; got {type(summary).__name__}.")
     kind = summary.get("kind")
+    kind = RENAMED_KINDS.get(kind, kind) if isinstance(kind, str) else kind
     if kind not in SUMMARIES:
         raise ValueError(f"summary `kind` must be one of {sorted(SUMMARIES)}; got {kind!r}.")
     schema = {**COMMON, **SUMMARIES[kind]}
@@ -469,14 +470,24 @@ READ_ONLY_KINDS = {
 """Summary kinds that visjax 0.3 wrote and reads still (with a `FutureWarning`), by the
 problem whose `visjax PROBLEM --data FILE` wrote them: that command now writes kind `run`."""
 
+RENAMED_KINDS = {"structure": "moving_point", "euclidean": "static_points"}
+"""Summary kinds of visjax 0.3 (old -> new): read as the new kind, with a `FutureWarning`."""
+
 
 def read_summary(path):
     """A `summary.json` as a `pandas.Series` (nested objects as Python values), checked
-    against its schema. A summary of a kind of `READ_ONLY_KINDS` is read with a
-    `FutureWarning`."""
+    against its schema. A summary of a kind of `READ_ONLY_KINDS` or `RENAMED_KINDS` (read
+    as its new kind) is read with a `FutureWarning`."""
     import pandas as pd
 
     summary = validate_summary(json.loads(Path(path).read_text()))
+    if summary["kind"] in RENAMED_KINDS:
+        warnings.warn(
+            f"{path}: summary kind {summary['kind']!r} of visjax 0.3 is now "
+            f"{RENAMED_KINDS[summary['kind']]!r}",
+            FutureWarning,
+            stacklevel=2,
+        )
     problem = READ_ONLY_KINDS.get(summary["kind"])
     if problem is not None:
         warnings.warn(
@@ -496,6 +507,9 @@ def schema_markdown() -> str:
     lines += [f"| `{k}` | `{t}` | {d} |" for k, (t, d) in COMMON.items()]
     for kind, keys in SUMMARIES.items():
         lines += ["", f"## `{kind}`"]
+        old = [k for k, v in RENAMED_KINDS.items() if v == kind]
+        if old:
+            lines += ["", f"Also read from the kind `{old[0]}` of visjax 0.3 (a `FutureWarning`)."]
         if kind in READ_ONLY_KINDS:
             lines += [
                 "",

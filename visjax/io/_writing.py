@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from .._version import __version__
-from ._outputs import finite_or_null, validate_summary, write_summary
+from ._outputs import SUMMARIES, finite_or_null, validate_summary, write_summary
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +75,8 @@ def command_summary(
     `out / "summary.json"` when `out` is given. **Returns:** the summary as written."""
     import jax
 
+    if kind not in SUMMARIES:  # an old kind is read, never written
+        raise ValueError(f"summary `kind` must be one of {sorted(SUMMARIES)}; got {kind!r}.")
     summary = {
         "kind": kind,
         "visjax_version": __version__,

@@ -105,7 +105,6 @@ _studies.register_reproduction(
     "moving_point",
     jang.reproduce_moving_point,
     title="Jang's thesis: the unknown input observer on the seven sets (simulated)",
-    folder="structure",
     quick="20 s per set, not 30",
     replace=True,
 )
@@ -113,7 +112,6 @@ _studies.register_reproduction(
     "static_points",
     nath.reproduce_static_points,
     title="Nath et al.: Euclidean structure from an uncalibrated moving camera",
-    folder="euclidean",
     quick="20 s, not 30",
     replace=True,
 )

@@ -258,14 +258,14 @@ class MovingPointProblem(AbstractProblem):
         ]
 
     def figure(self, method, solution):
-        """Like Figs. 5-7 and 5-8 of Jang's thesis (`plots.plot_structure`): the true and
+        """Like Figs. 5-7 and 5-8 of Jang's thesis (`plots.plot_moving_point`): the true and
         the estimated position, and the error zoomed on the second half; the estimate
         alone without a truth."""
-        from ..plots import plot_structure
+        from ..plots import plot_moving_point
 
         ts = solution.ts
         truth = None if self.truth is None else held(self.truth_ts, self.truth, ts) * self.to_m
-        return plot_structure(
+        return plot_moving_point(
             np.asarray(ts),
             None if truth is None else np.asarray(truth),
             np.asarray(solution.outputs.position) * self.to_m,

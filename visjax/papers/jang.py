@@ -49,6 +49,7 @@ import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
 from .._results import RESULTS, result_names
+from .._util import renamed
 from ..estimators import (
     MovingPointEstimator,
     Stream,
@@ -306,7 +307,7 @@ def observer(set_name: str, K=None, Y=None, x3_guess_cm: float = 100.0) -> Movin
 
 
 @final
-class StructureRun(eqx.Module):
+class MovingPointRun(eqx.Module):
     """One set: times, true and estimated positions (metres, camera frame), RMS window, and
     the camera velocity the observer was given at the 30 Hz frames (`frame_ts`,
     `camera_velocity` (F, 6) $= [v_c, \\omega_c]$ in m/s and rad/s, camera frame: the
@@ -320,7 +321,7 @@ class StructureRun(eqx.Module):
     camera_velocity: Float[Array, "F 6"]
 
 
-def structure_experiment(
+def moving_point_experiment(
     set_name: str,
     duration: float = 30.0,
     noise_px: float = 0.0,
@@ -329,7 +330,7 @@ def structure_experiment(
     Kc_observer=KC_REFINED,
     K=None,
     Y=None,
-) -> StructureRun:
+) -> MovingPointRun:
     """A thesis set as the `moving_point` problem states it (`moving_point_problem`):
     the simulated set with `noise_px` of pixel noise (seed `seed`), the UIO (eq. (3.5))
     at 1 kHz on the held 30 Hz frames, run once (`studies.solution`, the thesis' gains
@@ -358,7 +359,7 @@ def structure_experiment(
     err = np.asarray(estimate - truth)[np.asarray(steady)]
     # the thesis' lengths are in cm: the camera's linear velocity to m/s
     to_si = jnp.array([0.01, 0.01, 0.01, 1.0, 1.0, 1.0])
-    return StructureRun(
+    return MovingPointRun(
         ts=sol.ts,
         position=truth,
         estimate=estimate,
@@ -834,7 +835,7 @@ def table_lines(per_set: dict, names, who: str) -> list[str]:
     return lines
 
 
-def structure_reproduction(
+def moving_point_reproduction(
     sets=None,
     duration: float = 30.0,
     noise_px: float = 0.1,
@@ -845,7 +846,7 @@ def structure_reproduction(
     write=None,
     max_hours: float = 24.0,
 ) -> Reproduction:
-    """The UIO on the simulated analogues of the sets (`structure_experiment`), as `visjax
+    """The UIO on the simulated analogues of the sets (`moving_point_experiment`), as `visjax
     structure` reports it: per set the RMS position error beside the thesis' Tables
     5-3/5-4, `sets.parquet` (one row per set and axis), per set `estimate_<set>.npz` (`t`,
     `position`, `estimate`) and the figures `structure_<set>` (like Figs. 5-7/5-8) and
@@ -857,17 +858,17 @@ def structure_reproduction(
 
     from tqdm import tqdm
 
-    from ..plots import plot_camera_velocity, plot_structure
+    from ..plots import plot_camera_velocity, plot_moving_point
 
     check_seeds(seeds, noise_px)
     names = set_names(sets)
     per_set = {}
-    bar = tqdm(names, desc="structure", unit="set", disable=quiet)
+    bar = tqdm(names, desc="moving_point", unit="set", disable=quiet)
     clock = SeedClock(len(names) * seeds, max_hours, "moving_point", bar)
     for name in bar:
         runs = []
         for i in range(seeds):
-            runs.append(structure_experiment(name, duration, noise_px, seed=seed + i))
+            runs.append(moving_point_experiment(name, duration, noise_px, seed=seed + i))
             clock.tick()
         r = runs[0]
         rms = [[float(x) for x in run.rms] for run in runs]
@@ -886,7 +887,7 @@ def structure_reproduction(
         )
         figures = {
             f"structure_{name}": functools.partial(
-                plot_structure, r.ts, r.position, estimate, title=title
+                plot_moving_point, r.ts, r.position, estimate, title=title
             ),
             f"camera_velocity_{name}": functools.partial(
                 plot_camera_velocity,
@@ -1162,20 +1163,20 @@ def reproduce_moving_point(
     seeds: int = 1,
     max_hours: float = 24.0,
 ) -> list[dict]:
-    """The UIO on the simulated analogues of the seven sets (`structure_reproduction`),
+    """The UIO on the simulated analogues of the seven sets (`moving_point_reproduction`),
     registered as the reproduction `moving_point` (what `visjax moving_point` runs):
-    `summary.json` (kind `structure`), `sets.parquet`, per set `estimate_<set>.npz`,
+    `summary.json` (kind `moving_point`), `sets.parquet`, per set `estimate_<set>.npz`,
     `structure_<set>.<format>` and `camera_velocity_<set>.<format>` into `out`.
     `duration` per set: 30 s, 20 with `quick`. **Returns:** its rows: the mean RMS of the
     static sets (I.x) and of the moving ones (II.x) against the thesis' Tables 5-3/5-4."""
     duration = (20.0 if quick else 30.0) if duration is None else duration
     settings = dict(sets=sets, duration=duration, noise=noise, seed=seed, seeds=seeds)
     summary = write_report(
-        "structure",
+        "moving_point",
         settings,
         out,
         formats,
-        lambda write: structure_reproduction(
+        lambda write: moving_point_reproduction(
             sets,
             duration,
             noise,
@@ -1275,3 +1276,12 @@ def testbed_rows(summary: dict) -> list[dict]:
             )
         )
     return rows
+
+
+RENAMED = {
+    "structure_experiment": "moving_point_experiment",
+    "structure_reproduction": "moving_point_reproduction",
+    "StructureRun": "MovingPointRun",
+}
+"""The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
+__getattr__ = renamed("visjax.papers.jang", RENAMED, globals())

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from .._util import renamed
 from ..estimators import (
     StaticPointsEstimator,
     Stream,
@@ -167,7 +168,7 @@ DEFAULT_GAINS: dict = {}
 
 
 @final
-class EuclideanRun(eqx.Module):
+class StaticPointsRun(eqx.Module):
     """Times, estimated and true unknown feature positions (m), prediction errors (px), the
     PE measure, depth estimates, the minimum eigenvalue of Gamma_c and the reset count."""
 
@@ -202,14 +203,14 @@ def stream(sc: UncalibratedScenario) -> Stream:
     return static_points_stream(sc.ts, sc.R_b, sc.x_b, sc.p_s, sc.p_c, sc.omega_c)
 
 
-def euclidean_experiment(
+def static_points_experiment(
     duration: float = 30.0,
     noise_px: float = 0.0,
     *,
     seed: int = 0,
     exciting: bool = True,
     pe_window: float = 2.0,
-) -> EuclideanRun:
+) -> StaticPointsRun:
     """The project's scenario as the `static_points` problem states it
     (`static_points_problem` at 1 kHz): `noise_px` of pixel noise (seed `seed`), the
     estimator from the nominal camera (`initial_estimator`'s derived gains) run once
@@ -230,7 +231,7 @@ def euclidean_experiment(
             f"{int(sol.failed_sample)}."
         )
     d = sol.diagnostics
-    return EuclideanRun(
+    return StaticPointsRun(
         ts=sol.ts,
         omega_s=sol.outputs.omega_s,
         omega_true=problem.truth,
@@ -244,7 +245,7 @@ def euclidean_experiment(
     )
 
 
-def final_errors(r: EuclideanRun) -> np.ndarray:
+def final_errors(r: StaticPointsRun) -> np.ndarray:
     """The final position error of each unknown feature, metres."""
     return np.linalg.norm(np.asarray(r.omega_s[-1] - r.omega_true), axis=-1)
 
@@ -257,7 +258,7 @@ POSITION_BOUND_MM = 1.0
 simulation shows the estimates converging onto the features."""
 
 
-def euclidean_reproduction(
+def static_points_reproduction(
     duration: float = 30.0,
     noise_px: float = 0.0,
     *,
@@ -268,22 +269,22 @@ def euclidean_reproduction(
     max_hours: float = 24.0,
 ) -> Reproduction:
     """The adaptive least-squares structure estimator on its simulation
-    (`euclidean_experiment`), as `visjax static_points` reports it: the final position errors,
+    (`static_points_experiment`), as `visjax static_points` reports it: the final position errors,
     `estimate.npz` (`t`, `features` over time, `truth`) and the figure `euclidean`. With
     `seeds` > 1, the noise seeds `seed, ..., seed + seeds - 1`: the errors are their
     medians (each seed's in `final_position_error_m_seeds`), `features` has a leading seed
     axis and the figure shows the medians and their 10-90 % bands."""
     import functools
 
-    from ..plots import plot_euclidean
+    from ..plots import plot_static_points
 
     check_seeds(seeds, noise_px)
-    bar = stages(1 + seeds, "euclidean", quiet)
+    bar = stages(1 + seeds, "static_points", quiet)
     bar.set_postfix_str("simulate and estimate (compiles once)")
     runs = []
     clock = SeedClock(seeds, max_hours, "static_points", bar)
     for i in range(seeds):
-        runs.append(euclidean_experiment(duration, noise_px, seed=seed + i))
+        runs.append(static_points_experiment(duration, noise_px, seed=seed + i))
         clock.tick()
         bar.update()
     r = (
@@ -316,7 +317,7 @@ def euclidean_reproduction(
             f"adaptive least-squares structure estimator (Nath et al.): {duration:g} s at 1 kHz, "
             f"pixel noise {noise_px:g} px" + (f", {seeds} seeds" if seeds > 1 else "")
         )
-        figure = functools.partial(plot_euclidean, r, title=title)
+        figure = functools.partial(plot_static_points, r, title=title)
         write(Outputs(arrays={"estimate.npz": arrays}, figures={"euclidean": figure}))
     bar.update()
     bar.close()
@@ -348,18 +349,18 @@ def reproduce_static_points(
     max_hours: float = 24.0,
 ) -> list[dict]:
     """The adaptive least-squares structure estimator on its simulation
-    (`euclidean_reproduction`), registered as the reproduction `static_points` (what
-    `visjax static_points` runs): `summary.json` (kind `euclidean`), `estimate.npz` and
+    (`static_points_reproduction`), registered as the reproduction `static_points` (what
+    `visjax static_points` runs): `summary.json` (kind `static_points`), `estimate.npz` and
     `euclidean.<format>` into `out`. `duration`: 30 s, 20 with `quick`. **Returns:** its
     row: the largest final position error against `POSITION_BOUND_MM`."""
     duration = (20.0 if quick else 30.0) if duration is None else duration
     settings = dict(duration=duration, noise=noise, seed=seed, seeds=seeds)
     summary = write_report(
-        "euclidean",
+        "static_points",
         settings,
         out,
         formats,
-        lambda write: euclidean_reproduction(
+        lambda write: static_points_reproduction(
             duration,
             noise,
             seed=seed,
@@ -385,3 +386,12 @@ def static_points_rows(summary: dict) -> list[dict]:
             "mm",
         )
     ]
+
+
+RENAMED = {
+    "euclidean_experiment": "static_points_experiment",
+    "euclidean_reproduction": "static_points_reproduction",
+    "EuclideanRun": "StaticPointsRun",
+}
+"""The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
+__getattr__ = renamed("visjax.papers.nath", RENAMED, globals())
