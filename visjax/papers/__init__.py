@@ -32,21 +32,21 @@ from . import (
     nath as nath,
     spica as spica,
 )
-from ._moving_point import (
+from ._reproduction import Reproduction as Reproduction
+from .chitrakaran import (
+    VelocityProblem as VelocityProblem,
+    velocity_observer_bandwidth_hz as velocity_observer_bandwidth_hz,
+    velocity_problem as velocity_problem,
+)
+from .jang import (
     MovingPointProblem as MovingPointProblem,
     moving_point_observer_for_data as moving_point_observer_for_data,
     moving_point_problem as moving_point_problem,
 )
-from ._reproduction import Reproduction as Reproduction
-from ._static_points import (
+from .nath import (
     FinalEstimate as FinalEstimate,
     StaticPointsProblem as StaticPointsProblem,
     static_points_problem as static_points_problem,
-)
-from ._velocity import (
-    VelocityProblem as VelocityProblem,
-    velocity_observer_bandwidth_hz as velocity_observer_bandwidth_hz,
-    velocity_problem as velocity_problem,
 )
 
 _studies.register_problem(

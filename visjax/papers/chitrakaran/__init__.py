@@ -25,28 +25,13 @@ What the paper leaves open, chosen here:
 """
 
 import functools
-from collections.abc import Callable
-from typing import final
 
-import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, PRNGKeyArray
 
-from ..io import Outputs
-from ..sim import (
-    CameraRig,
-    Sampler,
-    add_pixel_noise,
-    integrate_twist,
-    object_points,
-    points_in_camera,
-    sinusoidal_trajectory,
-    view,
-)
-from ..studies import reproduction_row
-from ._reproduction import (
+from ...io import Outputs
+from ...studies import reproduction_row
+from .._reproduction import (
     Reproduction,
     SeedClock,
     check_seeds,
@@ -54,118 +39,27 @@ from ._reproduction import (
     stages,
     write_report,
 )
-
-A_EQ62 = ((1268.16, 0.0, 257.49), (0.0, 1267.50, 253.10), (0.0, 0.0, 1.0))
-R_STAR_EQ61 = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
-X_F_STAR_EQ60 = (0.0, 0.0, 2.0)
-FEATURES = (
-    (-0.1, 0.1, 0.01),  # s_1, section 6
-    (0.1, 0.1, 0.0),
-    (0.1, -0.1, -0.01),
-    (-0.1, -0.1, 0.0),
+from ._problem import (
+    ROBUST_GATE as ROBUST_GATE,
+    ROBUST_SCALE_PX as ROBUST_SCALE_PX,
+    VelocityProblem as VelocityProblem,
+    velocity_observer_bandwidth_hz as velocity_observer_bandwidth_hz,
+    velocity_problem as velocity_problem,
 )
-K_EQ63 = (300.0, 300.0, 200.0, 15.0, 15.0, 15.0)
-RHO_EQ63 = (100.0, 100.0, 10.0, 1.0, 1.0, 1.0)
-
-
-@final
-class Section6Scenario(eqx.Module):
-    """Sampled measurements and ground truth of a fixed-camera scenario.
-
-    **Fields:** `ts` (N,); `pixels` (N, 4, 2), feature 1 first, frame 0 the reference
-    image; `velocity` (N, 6) true $[v_e, \\omega_e]$; `x_f` (N, 3) and `R` (N, 3, 3) true
-    poses; `A`; `R_star`; `x_f_star`; `s` (4, 3) features in the object frame; `n_star` the
-    true plane normal; `z1_star` the true reference depth of feature 1.
-    """
-
-    ts: Float[Array, " N"]
-    pixels: Float[Array, "N 4 2"]
-    velocity: Float[Array, "N 6"]
-    x_f: Float[Array, "N 3"]
-    R: Float[Array, "N 3 3"]
-    A: Float[Array, "3 3"]
-    R_star: Float[Array, "3 3"]
-    x_f_star: Float[Array, "3"]
-    s: Float[Array, "4 3"]
-    n_star: Float[Array, "3"]
-    z1_star: Float[Array, ""]
-
-
-def section6_velocity(t: Array) -> Array:
-    """Eq. (59): $v_i = 0.2 \\sin t$ for all six degrees of freedom."""
-    return 0.2 * jnp.sin(t) * jnp.ones(6, dtype=jnp.result_type(t, float))
-
-
-def section6_scenario(
-    duration: float = 10.0,
-    rate_hz: float = 1000.0,
-    *,
-    noise_px: float = 0.0,
-    key: PRNGKeyArray | None = None,
-    velocity: Callable[[Array], Array] = section6_velocity,
-) -> Section6Scenario:
-    """The section-6 simulation: N = round(duration * rate_hz) samples at t_k = k / rate_hz.
-
-    **Arguments:**
-
-    - `duration`: seconds (10 in the paper).
-    - `rate_hz`: the sample rate (1000 in the paper).
-    - `noise_px`: standard deviation of pixel noise (0: noise-free, as in the paper).
-    - `key`: PRNG key for the noise (required when `noise_px > 0`).
-    - `velocity`: $t \\mapsto [v_e, \\omega_e]$; eq. (59) by default.
-    """
-    ts = Sampler(rate_hz=rate_hz).times(duration)
-    dtype = ts.dtype
-    A = jnp.array(A_EQ62, dtype)
-    R_star = jnp.array(R_STAR_EQ61, dtype)
-    x_f_star = jnp.array(X_F_STAR_EQ60, dtype)
-    s = jnp.array(FEATURES, dtype)
-    if velocity is section6_velocity:
-        # eq. (59): 0.2 sin(t) on all six entries, a sinusoid of 1/(2 pi) Hz
-        body = sinusoidal_trajectory(
-            jnp.full(6, 0.2, dtype), jnp.full(6, 1.0 / (2.0 * jnp.pi), dtype), x_f_star, R_star, ts
-        )
-    else:
-        body = integrate_twist(velocity, x_f_star, R_star, ts)
-    camera = CameraRig(A=A, image_size=None)  # the camera frame is the fixed frame
-    clean = view(camera, points_in_camera(camera, object_points(body, s)))  # eqs. (5), (15)
-    pixels = add_pixel_noise(key, clean, noise_px)
-    n_obj = jnp.cross(s[0], s[1])
-    n_cam = R_star @ n_obj
-    m1_star = x_f_star + R_star @ s[0]
-    n_cam = jnp.where(n_cam @ m1_star > 0, n_cam, -n_cam)  # d* > 0, eq. (4)
-    return Section6Scenario(
-        ts=ts,
-        pixels=pixels,
-        velocity=body.twist,
-        x_f=body.x,
-        R=body.R,
-        A=A,
-        R_star=R_star,
-        x_f_star=x_f_star,
-        s=s,
-        n_star=n_cam / jnp.linalg.norm(n_cam),
-        z1_star=m1_star[2],
-    )
-
-
-DOF_NAMES = ("vx", "vy", "vz", "wx", "wy", "wz")
-
-
-@final
-class VelocityRun(eqx.Module):
-    """One run of the section-6 experiment: times, true and estimated velocities."""
-
-    ts: Float[Array, " N"]
-    velocity: Float[Array, "N 6"]
-    estimate: Float[Array, "N 6"]
-    n_star: Float[Array, "3"]
-    z1_star: Float[Array, ""]
-
-
-def window(duration: float) -> tuple[float, float]:
-    """The paper's evaluation window, 5 to 10 s, shrunk into shorter runs (second half)."""
-    return (min(5.0, duration / 2.0), min(10.0, duration))
+from ._scene import (
+    A_EQ62 as A_EQ62,
+    DOF_NAMES as DOF_NAMES,
+    FEATURES as FEATURES,
+    K_EQ63 as K_EQ63,
+    R_STAR_EQ61 as R_STAR_EQ61,
+    RHO_EQ63 as RHO_EQ63,
+    X_F_STAR_EQ60 as X_F_STAR_EQ60,
+    Section6Scenario as Section6Scenario,
+    VelocityRun as VelocityRun,
+    section6_scenario as section6_scenario,
+    section6_velocity as section6_velocity,
+    window as window,
+)
 
 
 def velocity_experiment(
@@ -188,9 +82,8 @@ def velocity_experiment(
 
     **Raises:** `RuntimeError` if the run fails (its result code and sample).
     """
-    from .._results import RESULTS, result_names
-    from ..studies import solution
-    from ._velocity import velocity_problem
+    from ..._results import RESULTS, result_names
+    from ...studies import solution
 
     progress = progress or (lambda stage: None)
     progress("simulate section 6")
@@ -253,8 +146,7 @@ def noise_study(
 
     **Returns:** `{noise: array (seeds, 6)}` of RMS errors (NaN for a failed run).
     """
-    from ..studies import sweep
-    from ._velocity import velocity_problem
+    from ...studies import sweep
 
     problem = velocity_problem(duration=duration, rate_hz=rate_hz)
     levels = np.asarray(noise_levels, float)
@@ -309,9 +201,9 @@ def geometry_study(scenes: int = 100, points: int = 4, noise: float = 0.0, seed:
     (`reconstruction_errors`); `{"visjax_compile", "visjax", "opencv"}` in seconds."""
     import time
 
-    from ..baselines import opencv_reconstruction
-    from ..geometry import euclidean_reconstruction
-    from ..sim import random_planar_scenes
+    from ...baselines import opencv_reconstruction
+    from ...geometry import euclidean_reconstruction
+    from ...sim import random_planar_scenes
 
     sc = random_planar_scenes(scenes, points, seed=seed, noise_px=noise)
     rng = np.random.default_rng(seed + 1)
@@ -348,7 +240,7 @@ def geometry_reproduction(
     """Section 3 (`geometry_study`) as `visjax geometry` reports it: the median and largest
     error of each quantity for visjax and OpenCV, the timings, `scenes.parquet` (one row
     per scene and method) and the figure `geometry`."""
-    from ..plots import plot_geometry
+    from ...plots import plot_geometry
 
     bar = stages(2, "geometry", quiet)
     bar.set_postfix_str("visjax (batched) and OpenCV (per scene)")
@@ -419,7 +311,7 @@ def velocity_reproduction(
     noise), the noise seeds `seed, ..., seed + seeds - 1`: the errors are their medians
     (each seed's in `rms_window_seeds`), `v_hat` has a leading seed axis and the figure
     shows the median error and its 10-90 % band. `K`, `rho` default to eq. (63)."""
-    from ..plots import plot_velocity
+    from ...plots import plot_velocity
 
     check_seeds(seeds, noise_px)
     K = list(K_EQ63) if K is None else list(K)

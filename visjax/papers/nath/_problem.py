@@ -10,9 +10,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._util import Frozen, Note, number_text
-from ..estimators import AbstractAdjoint, DirectAdjoint
-from ..studies import AbstractProblem, Parameter, noise_parameter
+from ..._util import Frozen, Note, number_text
+from ...estimators import AbstractAdjoint, DirectAdjoint
+from ...studies import AbstractProblem, Parameter, noise_parameter
+from . import _scene as nath
 
 # the robust settings (a stated choice, not tuned to any result): the Cauchy loss, whose
 # influence vanishes for large residuals (Huber's bounded influence still lets a third of a
@@ -118,7 +119,7 @@ class StaticPointsProblem(AbstractProblem):
         }
 
     def inputs(self, key):
-        from ..sim import add_pixel_noise
+        from ...sim import add_pixel_noise
 
         return {"pixels": add_pixel_noise(key, self.clean, self.noise_px)}
 
@@ -127,7 +128,7 @@ class StaticPointsProblem(AbstractProblem):
         return self.ts if self.times is None else self.times.array
 
     def _estimator(self, pixels):
-        from ..estimators import StaticPointsEstimator, static_points_stream
+        from ...estimators import StaticPointsEstimator, static_points_stream
 
         k = self.n_known
         stream = static_points_stream(
@@ -145,8 +146,8 @@ class StaticPointsProblem(AbstractProblem):
         return stream, est
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ..baselines import bundle_adjustment, cauchy, static_points_ekf
-        from ..estimators import SaveAt, run
+        from ...baselines import bundle_adjustment, cauchy, static_points_ekf
+        from ...estimators import SaveAt, run
 
         stream, est = self._estimator(inputs["pixels"])
         if method == "estimator":
@@ -255,7 +256,7 @@ class StaticPointsProblem(AbstractProblem):
     def figure(self, method, solution):
         """Each unknown feature's estimated position and, with the truth, its error
         (`plots.plot_feature_estimates`), as Nath et al. show the structure's convergence."""
-        from ..plots import plot_feature_estimates
+        from ...plots import plot_feature_estimates
 
         return plot_feature_estimates(
             np.asarray(solution.ts),
@@ -285,8 +286,7 @@ def static_points_problem(
     `exciting=False`: the scene's platform only moves along its optical axis (not
     persistently exciting: the structure is not recoverable). `robust`: the baselines'
     robust settings (`StaticPointsProblem`)."""
-    from ..estimators import Stream, integration_step
-    from . import nath
+    from ...estimators import Stream, integration_step
 
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
@@ -301,7 +301,7 @@ def static_points_problem(
     else:
         if not exciting:
             raise ValueError("`exciting` chooses the project's scene; a data file has its own.")
-        from ..io import StaticPointsData
+        from ...io import StaticPointsData
 
         d = StaticPointsData.load(data)
         ts, R_b, x_b, omega_c = (
