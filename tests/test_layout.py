@@ -23,17 +23,28 @@ LAYERS = [
 ]
 
 
+def _absolute(path: pathlib.Path, node: ast.ImportFrom) -> list[str]:
+    """The parts of the visjax module an import names, relative to the package (`from
+    ...estimators import run` in `papers/jang/_problem.py` -> `["estimators"]`; `from ..
+    import papers` -> `["papers"]`); empty for an import from outside visjax."""
+    package = list(path.relative_to(PACKAGE).parts[:-1])
+    if node.level:
+        base = package[: len(package) - (node.level - 1)]
+        return base + (node.module.split(".") if node.module else [])
+    if node.module and node.module.split(".")[0] == "visjax":
+        return node.module.split(".")[1:]
+    return []
+
+
 def _imported_subpackages(path: pathlib.Path) -> set[str]:
     found = set()
     for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom) and node.level >= 1 and node.module:
-            rel = path.relative_to(PACKAGE).parts
-            if node.level == 2 or (node.level == 1 and len(rel) == 1):
-                found.add(node.module.split(".")[0])
-        elif isinstance(node, ast.ImportFrom) and node.level == 2 and not node.module:
-            found.update(alias.name for alias in node.names)  # `from .. import papers`
-        elif isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("visjax."):
-            found.add(node.module.split(".")[1])
+        if isinstance(node, ast.ImportFrom):
+            parts = _absolute(path, node)
+            if parts:
+                found.add(parts[0])
+            elif node.level and not node.module:  # `from .. import papers` at the top
+                found.update(alias.name for alias in node.names)
     return found
 
 
@@ -41,9 +52,79 @@ def test_imports_flow_down_the_layers():
     for i, name in enumerate(LAYERS):
         allowed = set(LAYERS[:i]) | {"_results", "_util", "_small", "_xla_workaround", "_version"}
         module = PACKAGE / f"{name}.py"
-        for path in [module] if module.is_file() else (PACKAGE / name).glob("*.py"):
+        for path in [module] if module.is_file() else (PACKAGE / name).rglob("*.py"):
             used = _imported_subpackages(path) - {name}
-            assert used <= allowed, (path.name, used - allowed)
+            assert used <= allowed, (str(path.relative_to(PACKAGE)), used - allowed)
+
+
+def _module(path: pathlib.Path) -> str:
+    parts = list(path.relative_to(PACKAGE).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the visjax modules it imports, every import counted (at the top or inside
+    a function); `from X import y` is the module `X.y` where that is one."""
+    modules = {_module(p): p for p in PACKAGE.rglob("*.py")}
+    graph = {}
+    for name, path in modules.items():
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            parts = _absolute(path, node)
+            if not parts and not (node.level and not node.module):
+                continue
+            for alias in node.names:
+                target = ".".join([*parts, alias.name])
+                while target and target not in modules:
+                    target = target.rpartition(".")[0]
+                if target != name:
+                    found.add(target)
+        graph[name] = found
+    return graph
+
+
+def test_no_import_circle():
+    """Issue 45: no circle among the package's modules, function-local imports included
+    (a package's `__init__` and the modules it re-exports included)."""
+    graph = _import_graph()
+    index, low, stack, circles = {}, {}, [], []
+
+    def visit(v):  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while (w := stack.pop()) != v:
+                component.append(w)
+            if component:
+                circles.append(sorted([v, *component]))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert circles == []
+    assert len(graph) > 60 and sum(map(len, graph.values())) > 200  # the graph was read
+
+
+def test_no_function_local_import_of_a_visjax_module():
+    """Issue 45: every arrow is at the top of its module, where a reader sees it (optional
+    heavy libraries may stay lazy)."""
+    found = []
+    for path in PACKAGE.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                for sub in ast.walk(node):
+                    if isinstance(sub, ast.ImportFrom) and _absolute(path, sub):
+                        found.append(f"{path.relative_to(PACKAGE)}:{sub.lineno}")
+    assert found == []
 
 
 def _private_imports(path: pathlib.Path) -> list[str]:

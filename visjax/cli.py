@@ -4,14 +4,19 @@ registered problem)."""
 
 import argparse
 import contextlib
-import importlib
 import inspect
 import math
 import os
 import sys
 from pathlib import Path
 
-from . import report
+from . import __version__, report, studies, verbs
+from ._xla_workaround import apply_xla_cpu_workarounds
+from .estimators import MAX_STEPS
+from .io import DataFormatError, OutputConflictError, check_output_path, staged_output
+from .report import RunFailed
+from .studies import UserCodeError, load_module, registered, registered_reproduction
+from .verbs import MAX_RUNS, Refused, check_study, grid_size
 
 VERBS = ("run", "compare", "sweep", "tune")
 PAPER_COMMANDS = ("velocity", "moving_point", "static_points")  # with --data: `run PROBLEM`
@@ -77,7 +82,6 @@ def _grid_spec(text: str) -> str:
     """A `--grid` spec that parses (`studies.parse_grid`), of at most `verbs.MAX_RUNS`
     points (counted from the text first: nothing that large is built), every value
     finite. Names and signs need the problem: `verbs.check_study`."""
-    from .verbs import MAX_RUNS, grid_size
 
     size = grid_size(text)
     if size is not None and size > MAX_RUNS:
@@ -85,7 +89,7 @@ def _grid_spec(text: str) -> str:
             f"the grid {text!r} has {size:.3g} points, more than one command runs ({MAX_RUNS:.0e})"
         )
     try:
-        points = importlib.import_module("visjax.studies").parse_grid(text)
+        points = studies.parse_grid(text)
     except ValueError as e:
         raise argparse.ArgumentTypeError(str(e)) from None
     for name, values in points.items():
@@ -98,7 +102,7 @@ def _grid_spec(text: str) -> str:
 
 def _set_name(text: str) -> str:
     """A set of Jang's thesis: a variant of the registered `moving_point` problem."""
-    sets = importlib.import_module("visjax.studies").registered("moving_point").variants
+    sets = registered("moving_point").variants
     if text not in sets:
         raise argparse.ArgumentTypeError(f"unknown set {text!r}; choose from {', '.join(sets)}")
     return text
@@ -145,7 +149,7 @@ _HOURS = "refuse, after the second seed, --seeds estimated to take longer (defau
 def _verb(sub, name, help, *, seeds, noise, grid):
     """A study verb over any registered problem: `visjax NAME PROBLEM [options]`."""
     p = sub.add_parser(name, help=help)
-    names = importlib.import_module("visjax.studies").problem_names()
+    names = studies.problem_names()
     p.add_argument("problem", help=f"{', '.join(names)}, their aliases, or yours (--import)")
     held = "; then as many held-out seeds" if grid else ""
     seeds = None if seeds is None else (seeds, f"noise seeds (default {seeds}){held}")
@@ -164,7 +168,6 @@ def _verb(sub, name, help, *, seeds, noise, grid):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
 
     parser = _Parser(prog="visjax", description="Vision-based estimators in JAX (docs/)")
     parser.add_argument("--version", action="version", version=f"visjax {__version__}")
@@ -263,8 +266,6 @@ def _call(a):
     """The one library call of the command, its parameters taken from the options of the
     same name (`--format` is `formats`; `--set` is `sets` or `variants`): a verb's, or a
     paper's registered reproduction (`visjax velocity` is the reproduction `velocity`)."""
-    from . import verbs
-    from .studies import registered_reproduction
 
     if a.command in (*VERBS, "merge"):
         fn = getattr(verbs, f"{a.command}_command")
@@ -294,8 +295,6 @@ def _check(a) -> None:
     if a.command in ("velocity", "static_points") and a.duration * getattr(a, "rate", 1e3) < 2:
         raise argparse.ArgumentTypeError("--duration times the rate must give at least 2 samples")
     if a.command in ("velocity", "moving_point", "static_points", "testbed"):
-        from .estimators import MAX_STEPS
-
         samples = a.duration * getattr(a, "rate", 1e3)  # the papers' scenes run at 1 kHz
         if samples > MAX_STEPS:
             raise argparse.ArgumentTypeError(
@@ -319,7 +318,6 @@ def _check(a) -> None:
             raise argparse.ArgumentTypeError(
                 "--seeds above 1 needs --noise above 0: noise-free runs are all the same"
             )
-    from .studies import load_module, registered
 
     for module in a.modules or ():  # problems and reproductions of the user's
         try:  # a module that raises on import: `UserCodeError`, with its traceback
@@ -333,7 +331,6 @@ def _check(a) -> None:
             )
         except ValueError as e:
             raise argparse.ArgumentTypeError(str(e)) from None
-    from .io import check_output_path
 
     try:
         check_output_path(a.out, file=getattr(a, "out_is_file", False))
@@ -351,7 +348,6 @@ def _check_study(a) -> None:
     """A study's size and grid, before any compile (`verbs.check_study`: the run count,
     the grid's parameter names and values on the built problem, a lower bound of the
     memory it needs)."""
-    from .verbs import Refused, check_study
 
     shard = getattr(a, "shard", None)
     try:
@@ -377,7 +373,6 @@ def main(argv=None) -> int:
     stops a command before its files (a paper's simulation that fails) leaves nothing.
     Commands over many runs (`compare`, `sweep`, `tune`) record each run's code and exit
     with 0."""
-    from ._xla_workaround import apply_xla_cpu_workarounds
 
     apply_xla_cpu_workarounds()  # the command line's own choice; `import visjax` sets nothing
     import jax
@@ -385,9 +380,6 @@ def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)  # float64 on the command line, set here once
     parser = build_parser()
     args = parser.parse_args(argv)
-    from .io import DataFormatError, OutputConflictError, staged_output
-    from .report import RunFailed
-    from .studies import UserCodeError
 
     failed = None
     try:
@@ -416,8 +408,6 @@ def main(argv=None) -> int:
         sys.stderr.write(_user_traceback(e.__cause__))
         return 1
     except ValueError as e:
-        from .verbs import Refused  # a study too large for this machine, found as it starts
-
         sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
         return 2 if isinstance(e, Refused) else 1
     except RuntimeError as e:  # a failed run: one line

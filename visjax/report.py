@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .frontend import read_video, track_frames
 from .io import DataFormatError, command_summary, save_tracks_csv
 from .studies import (
     ROW_KEYS,
@@ -56,7 +57,6 @@ def track_report(
     line) for a video that cannot be tracked: not a readable or a damaged video
     (`read_video`), fewer than 2 frames (a still image), no frame rate, no feature found.
     """
-    from .frontend import read_video, track_frames
 
     out = Path(out)
     if out.suffix.lower() not in (".npz", ".csv"):

@@ -29,8 +29,38 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import command_summary, figure_files
-from .studies import available_memory
+from . import studies
+from ._results import result_names
+from .io import (
+    DROPPED_RESULT,
+    MAX_DROPPED_FRACTION,
+    command_summary,
+    coverage_line,
+    figure_files,
+    file_coverage,
+    output_name,
+    user_path,
+    written_directly,
+)
+from .plots import plot_comparison, plot_sweep, plot_tune_history, save_figure
+from .report import RunFailed
+from .studies import (
+    MemoryLimitError,
+    as_json,
+    available_memory,
+    check_values,
+    clear_parts,
+    find_parts,
+    innovation_line,
+    merge_parts,
+    parse_grid,
+    quality,
+    quality_line,
+    read_manifest,
+    registered,
+    solution,
+    solution_table,
+)
 
 MAX_RUNS = 10**9
 """The most runs one study command makes (grid points x seeds, the held-out runs, the
@@ -67,7 +97,6 @@ def _settings(arguments: dict) -> dict:
 def _built(name, data, stamp, noise, duration, rate, variant, robust=False, options=()):
     """A problem, cached per process (a data file by its path and modification time): a
     `tune` after a `sweep` of the same problem reuses its set-up and compiled runs."""
-    from .studies import registered
 
     return registered(name).make(
         data=data, noise_px=noise, duration=duration, rate_hz=rate, variant=variant,
@@ -85,7 +114,6 @@ def problems(
     builder's `robust=True`); `options`: more of its builder's keyword arguments (`None`
     values left out). **Raises:** `ValueError` for an unknown problem, variant or option
     (a problem without robust settings takes no `--robust`)."""
-    from .studies import registered
 
     entry = registered(name)
     stamp = None if data is None else os.path.getmtime(data)
@@ -142,7 +170,6 @@ def _too_many(command, total, what) -> None:
 def _check_grid(name, problem, spec) -> dict:
     """The grid's points, its parameter names among the problem's (the closest suggested)
     and its values valid for them (finite; positive where the parameter must be)."""
-    from .studies import check_values, parse_grid
 
     if not spec:
         raise Refused(f"{problem.title} has no default grid: give --grid")
@@ -218,7 +245,6 @@ def check_study(
         points = f"{count} grid points x {seeds} seeds" if grid else f"{seeds} seeds"
         points += f" and {steps} steps" if command == "tune" else ""
         _too_many(command, n_variants * _runs(command, count, seeds, steps, 1), points)
-    from .studies import registered
 
     entry = registered(problem)
     every = command != "compare"
@@ -244,7 +270,6 @@ def check_study(
 def _folder(out, tag):
     if out is None:
         return None
-    from .io import output_name
 
     return Path(out) if tag is None else Path(out) / output_name(tag)
 
@@ -289,10 +314,6 @@ def run_command(
     started = time.perf_counter()
     settings = _settings(locals())
     import jax
-
-    from ._results import result_names
-    from .report import RunFailed
-    from .studies import as_json, innovation_line, quality, quality_line, solution, solution_table
 
     results, failures = {}, []
     dropped = _dropped(problem, data)
@@ -349,8 +370,6 @@ def run_command(
         if folder is not None:
             import pandas as pd
 
-            from .plots import save_figure
-
             folder.mkdir(parents=True, exist_ok=True)
             pd.DataFrame(solution_table(sol)).to_parquet(folder / "estimates.parquet", index=False)
             save_figure(p.figure(m, sol), folder / "run.png", formats)
@@ -371,7 +390,6 @@ def _judge_records(problem, records: list, body: dict) -> dict | None:
     `quality` of the comparison: the trivial estimate, its metric, the threshold and, per
     method, the runs no better than it. **Returns:** that count per method (`None` for a
     problem without a trivial estimate)."""
-    from .studies import quality
 
     counts: dict[str, int] = {m: 0 for m in problem.methods}
     judged, trivial = None, problem.trivial() if problem.scored else {}
@@ -403,8 +421,6 @@ def _dropped(problem, data) -> dict | None:
     data file or for a format of its own."""
     if data is None:
         return None
-    from .io import DROPPED_RESULT, MAX_DROPPED_FRACTION, coverage_line, file_coverage
-    from .studies import registered
 
     cover = file_coverage(registered(problem).name, data)
     if cover is None:
@@ -454,9 +470,6 @@ def compare_command(
     started = time.perf_counter()
     settings = _settings(locals())
     import pandas as pd
-
-    from . import studies
-    from .plots import plot_comparison
 
     results = {}
     dropped = _dropped(problem, data)
@@ -568,8 +581,6 @@ def _held_out(problem, points: dict, seeds: int, chunk: int, mesh, first: int = 
     seeds)."""
     import jax.numpy as jnp
 
-    from . import studies
-
     names = list(points)
     full = [_full(problem, points[n]) for n in names]
     params = {k: np.stack([f[k] for f in full]) for k in full[0]}
@@ -594,7 +605,6 @@ def _py(x):
 
 
 def _grid(problem, grid):
-    from . import studies
 
     spec = grid or getattr(problem, "grid", "")
     if not spec:
@@ -608,8 +618,6 @@ def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0, **durab
     only (no summary nor best: those need every run, after `visjax merge`)."""
     import jax.numpy as jnp
 
-    from . import studies
-
     spec, params = _grid(problem, grid)
     try:
         table = studies.sweep(
@@ -622,8 +630,6 @@ def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0, **durab
             **durable,
         )
     except ValueError as e:  # the sweep's own memory check (XLA's analysis of a chunk)
-        from .studies import MemoryLimitError
-
         if durable.get("max_memory") is not None and isinstance(e, MemoryLimitError):
             raise Refused(str(e)) from None
         raise
@@ -660,7 +666,6 @@ def _job_slice(shard):
 def _parts_folder(folder: Path, job) -> Path:
     """Where a sweep's parts go: beside its other outputs, in the folder the user asked
     for (never the staging one: an interrupted sweep keeps them)."""
-    from .io import user_path, written_directly
 
     final = Path(user_path(str(folder)))
     parts = final / ("parts" if job is None else f"parts-{job[0]}-of-{job[1]}")
@@ -672,9 +677,6 @@ def _refuse_finished(folder: Path, parts: Path, resume: bool, force: bool) -> No
     """An output folder holding a finished sweep is replaced only with `--force`; its
     parts are cleared with `--force` (a fresh start)."""
     import json
-
-    from .io import user_path
-    from .studies import clear_parts
 
     final = Path(user_path(str(folder)))
     summary = final / "summary.json"
@@ -732,7 +734,6 @@ def _interruptible():
 
 
 def _saved_runs(parts: Path) -> tuple[int, int]:
-    from .studies import read_manifest
 
     try:
         m = read_manifest(parts)
@@ -795,7 +796,6 @@ def sweep_command(
     the chunks as tasks on a Ray cluster (a local one without an address)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    from . import studies
 
     devices, job = _job_slice(shard)
     if (resume or force or job is not None) and out is None:
@@ -822,8 +822,6 @@ def _sweeps(
     problem, grid, noise, seeds, data, duration, rate, variants, chunk, out, quiet, seed,
     formats, resume, force, devices, job, executor, settings, started, robust=False,
 ):  # fmt: skip
-    from . import studies
-    from .plots import plot_sweep
 
     say = None if quiet else print
     results, mesh = {}, _mesh(devices)
@@ -920,8 +918,6 @@ def merge_command(paths, out=None, quiet: bool = False) -> dict:
     variants: one table per sweep, in a folder per variant."""
     started = time.perf_counter()
     settings = _settings(locals())
-    from . import studies
-    from .studies import find_parts, merge_parts, read_manifest
 
     folders = find_parts(paths)
     groups: dict[str, list] = {}
@@ -990,9 +986,6 @@ def tune_command(
     import jax.numpy as jnp
     import optax
     import pandas as pd
-
-    from . import studies
-    from .plots import plot_sweep, plot_tune_history
 
     devices, job = _job_slice(shard)
     if job is not None:

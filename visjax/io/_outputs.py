@@ -21,6 +21,8 @@ import math
 import warnings
 from pathlib import Path
 
+from ._staging import unstaged
+
 COMMON = {
     "kind": ("str", "the schema of this summary (a key of `visjax.io.SUMMARIES`)"),
     "visjax_version": ("str", "the visjax version that wrote it"),
@@ -455,7 +457,6 @@ def finite_or_null(obj):
 def write_summary(path, summary: dict) -> dict:
     """Validate `summary` and write it to `path` as strict JSON; returns what was written.
     Inside `staged_output`, paths name the final folder, not the staging one."""
-    from ._staging import unstaged
 
     clean = validate_summary(finite_or_null(unstaged(summary)))
     Path(path).write_text(json.dumps(clean, indent=2, allow_nan=False))

@@ -65,6 +65,7 @@ from ..estimators import (
     SaveAt,
     Stream,
     checked_samples,
+    innovation,
     reject_mask,
     rejected_samples,
     run,
@@ -75,10 +76,14 @@ from ..geometry import (
     pixel_to_normalized,
     skew,
     sl3_normalize,
+    so3_exp,
 )
 from ..io import Outputs
+from ..plots import plot_comparison
+from ..sim import sample_times
 from ..studies import AbstractProblem, Parameter, compare, noise_parameter, reproduction_row
 from ._reproduction import Reproduction, write_report
+from .chitrakaran import velocity_problem
 
 
 class HomographyMeasurement(eqx.Module):
@@ -291,8 +296,6 @@ def homography_scene(duration: float = 2.0, rate_hz: float = 1000.0) -> Homograp
     the pose $R(t) = \\exp(t[\\omega]_\\times) R_0$, $\\xi(t) = \\xi_0 + t v$ in the reference
     frame; a point $X$ of the reference frame is $R^T(X - \\xi)$ in the current one; the
     homography $H \\propto (I + \\xi n^T / (d - n^T\\xi))\\, R$ brought to SL(3)."""
-    from ..geometry import so3_exp
-    from ..sim import sample_times
 
     ts = sample_times(duration, rate_hz)
     K = jnp.asarray(CAMERA)
@@ -496,7 +499,6 @@ class HomographyProblem(AbstractProblem):
         against the one the estimate predicts from the reference, $\\hat H^{-1}\\mathring
         p_i$ normalized, against the noise the bearings imply (`estimators.innovation`);
         `None` for the per-frame fits."""
-        from ..estimators import innovation
 
         if method not in ("estimator", "gyro"):
             return None
@@ -666,8 +668,6 @@ def homography_problem(
     if robust:
         raise ValueError('--robust applies to the variant "tracking" only')
     if variant == "velocity_front_end":
-        from . import velocity_problem
-
         base = velocity_problem(
             noise_px=noise_px, duration=10.0 if duration is None else duration, rate_hz=rate_hz
         )
@@ -705,8 +705,6 @@ def reproduce_homography(
     **Returns:** its rows: each front end's median worst-axis RMS against that of answering
     zero velocity (kind `trivial`)."""
     import pandas as pd
-
-    from ..plots import plot_comparison
 
     seeds = (2 if quick else 5) if seeds is None else int(seeds)
     duration = (4.0 if quick else 10.0) if duration is None else float(duration)

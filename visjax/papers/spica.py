@@ -56,6 +56,7 @@ from ..estimators import (
     SaveAt,
     Stream,
     checked_samples,
+    innovation,
     moving_point_stream,
     reject_mask,
     rejected_samples,
@@ -63,6 +64,8 @@ from ..estimators import (
 )
 from ..geometry import pixel_to_normalized, skew
 from ..io import Outputs
+from ..plots import plot_transient
+from ..sim import CameraRig, constant_twist_trajectory, points_in_camera, sample_times, view
 from ..studies import AbstractProblem, Parameter, noise_parameter, reproduction_row
 from ._reproduction import Reproduction, stages, write_report
 
@@ -307,7 +310,6 @@ def point_depth_scene(duration: float = 1.0, rate_hz: float = 1000.0) -> PointDe
     """Five static points (`POINTS`) seen by a camera moving with the constant twist
     `TWIST` (closed form, `visjax.sim.constant_twist_trajectory`), `duration` s at
     `rate_hz`."""
-    from ..sim import CameraRig, constant_twist_trajectory, points_in_camera, sample_times, view
 
     ts = sample_times(duration, rate_hz)
     body = constant_twist_trajectory(jnp.asarray(TWIST), jnp.zeros(3), jnp.eye(3), ts)
@@ -516,7 +518,6 @@ class PointDepthProblem(AbstractProblem):
         coordinates) over the second half, against the noise its measurements imply
         (`estimators.innovation`); `None` for the baselines and a solution saved without
         its states."""
-        from ..estimators import innovation
 
         if method != "estimator" or getattr(solution, "states", None) is None:
             return None
@@ -929,7 +930,6 @@ def active_point_depth_run(
     deviation `noise_px` pixels (drawn from `key`; zeros without noise), (N, n, 2). The
     integration step is the sampling interval unless `dt` is given. Returns `run`'s
     `Solution` (outputs: `ActivePointDepthOutput`)."""
-    from ..sim import sample_times
 
     if not noise_px >= 0:
         raise ValueError(f"`noise_px` must be non-negative; got {noise_px!r}.")
@@ -1083,7 +1083,6 @@ def reproduce_point_depth(
     (seed `seed`). **Returns:** its rows: per projection the largest deviation from the
     assigned response against `DEVIATION_BOUND`, and the time to 5% against the assigned
     response's."""
-    from ..plots import plot_transient
 
     duration = (1.5 if quick else 2.0) if duration is None else float(duration)
     projections = ("planar", "spherical")

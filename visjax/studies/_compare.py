@@ -11,6 +11,7 @@ import jax
 import numpy as np
 
 from .._results import RESULTS, result_names
+from ._problem import AbstractProblem, as_json, method_runs
 
 
 class StudyTooLong(ValueError):
@@ -66,7 +67,6 @@ def compare(
     call time), `compile_s` (the first call, compilation included: `first_seed` only, else
     `None`) and the keys of `score`.
     """
-    from ._problem import AbstractProblem, as_json, method_runs
 
     if isinstance(methods, AbstractProblem):
         problem = methods.at(methods.resolve(params))  # its data parameters set

@@ -21,6 +21,8 @@ from jax.sharding import NamedSharding, PartitionSpec
 
 from .._results import RESULTS, all_finite
 from .._xla_workaround import warn_if_hang_prone
+from ._parts import Parts
+from ._problem import AbstractProblem, check_values, run_identity, runner
 
 
 def log_axis(low: float | int, high: float | int, num: int) -> np.ndarray:
@@ -232,8 +234,6 @@ def sweep(
     NaN, never its frozen state's numbers. A run that reports success but whose metric is
     not finite is marked `nonfinite_output`. With `shard`, the rows of the shard's runs.
     """
-    from ._parts import Parts
-    from ._problem import AbstractProblem, check_values, run_identity, runner
 
     identity_source, info = None, {}
     if isinstance(factory, AbstractProblem):

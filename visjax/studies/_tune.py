@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._results import RESULTS
+from ._problem import AbstractProblem, check_values, runner
 from ._sweep import _key_data
 
 
@@ -58,8 +60,6 @@ def objective(
     """
     if mode not in ("forward", "reverse"):
         raise ValueError(f"`mode` must be 'forward' or 'reverse'; got {mode!r}.")
-    from .._results import RESULTS
-    from ._problem import AbstractProblem
 
     if isinstance(factory, AbstractProblem):
         if keys is not None:
@@ -148,8 +148,6 @@ def tune(
     import optax
     import optimistix as optx
 
-    from ._problem import AbstractProblem, check_values
-
     if isinstance(factory, AbstractProblem):
         problem = factory
         if keys is not None:
@@ -237,7 +235,6 @@ def tune(
 
 def _problem_loss(problem, method, fixed):
     """`(factory, loss)` of one method of a problem: its headline metric as the loss."""
-    from ._problem import runner
 
     factory = runner(problem, method, fixed)
 

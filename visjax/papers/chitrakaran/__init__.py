@@ -29,8 +29,13 @@ import functools
 import jax
 import numpy as np
 
+from ..._results import RESULTS, result_names
+from ...baselines import opencv_reconstruction
+from ...geometry import euclidean_reconstruction
 from ...io import Outputs
-from ...studies import reproduction_row
+from ...plots import plot_geometry, plot_velocity
+from ...sim import random_planar_scenes
+from ...studies import reproduction_row, solution, sweep
 from .._reproduction import (
     Reproduction,
     SeedClock,
@@ -82,8 +87,6 @@ def velocity_experiment(
 
     **Raises:** `RuntimeError` if the run fails (its result code and sample).
     """
-    from ..._results import RESULTS, result_names
-    from ...studies import solution
 
     progress = progress or (lambda stage: None)
     progress("simulate section 6")
@@ -146,7 +149,6 @@ def noise_study(
 
     **Returns:** `{noise: array (seeds, 6)}` of RMS errors (NaN for a failed run).
     """
-    from ...studies import sweep
 
     problem = velocity_problem(duration=duration, rate_hz=rate_hz)
     levels = np.asarray(noise_levels, float)
@@ -201,10 +203,6 @@ def geometry_study(scenes: int = 100, points: int = 4, noise: float = 0.0, seed:
     (`reconstruction_errors`); `{"visjax_compile", "visjax", "opencv"}` in seconds."""
     import time
 
-    from ...baselines import opencv_reconstruction
-    from ...geometry import euclidean_reconstruction
-    from ...sim import random_planar_scenes
-
     sc = random_planar_scenes(scenes, points, seed=seed, noise_px=noise)
     rng = np.random.default_rng(seed + 1)
     prior = sc.n_star + 0.02 * rng.normal(size=sc.n_star.shape)
@@ -240,7 +238,6 @@ def geometry_reproduction(
     """Section 3 (`geometry_study`) as `visjax geometry` reports it: the median and largest
     error of each quantity for visjax and OpenCV, the timings, `scenes.parquet` (one row
     per scene and method) and the figure `geometry`."""
-    from ...plots import plot_geometry
 
     bar = stages(2, "geometry", quiet)
     bar.set_postfix_str("visjax (batched) and OpenCV (per scene)")
@@ -311,7 +308,6 @@ def velocity_reproduction(
     noise), the noise seeds `seed, ..., seed + seeds - 1`: the errors are their medians
     (each seed's in `rms_window_seeds`), `v_hat` has a leading seed axis and the figure
     shows the median error and its 10-90 % band. `K`, `rho` default to eq. (63)."""
-    from ...plots import plot_velocity
 
     check_seeds(seeds, noise_px)
     K = list(K_EQ63) if K is None else list(K)

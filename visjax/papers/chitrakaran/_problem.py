@@ -8,8 +8,35 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ..._results import RESULTS, first_failure
 from ..._util import Frozen, Note, number_text
-from ...estimators import AbstractAdjoint, DirectAdjoint, lowpass, lowpass_delay
+from ...baselines import (
+    SmootherDiagnostics,
+    cauchy,
+    frame_poses,
+    half_width_for_bandwidth,
+    velocity_covariance,
+    velocity_ekf,
+    velocity_smoother,
+)
+from ...estimators import (
+    AbstractAdjoint,
+    DirectAdjoint,
+    FixedCamera,
+    SaveAt,
+    VelocityEstimator,
+    WindowRMS,
+    fixed_camera,
+    integration_step,
+    lowpass,
+    lowpass_delay,
+    run,
+    velocity_innovation,
+    velocity_stream,
+)
+from ...io import VelocityData
+from ...plots import plot_velocity
+from ...sim import add_pixel_noise
 from ...studies import AbstractProblem, Parameter, as_default, held, noise_parameter
 from ._scene import K_EQ63, RHO_EQ63, section6_scenario, window
 
@@ -128,19 +155,16 @@ class VelocityProblem(AbstractProblem):
         }
 
     def inputs(self, key):
-        from ...sim import add_pixel_noise
 
         return {"pixels": add_pixel_noise(key, self.clean, self.noise_px)}
 
     def _window(self):
-        from ...estimators import WindowRMS
 
         t0 = self.ts[0]
         a, b = self.window
         return WindowRMS(t0 + a, t0 + b + 1e-9, field="v_hat")
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ...estimators import SaveAt, run
 
         pixels = inputs["pixels"]
         if method == "estimator":
@@ -162,8 +186,6 @@ class VelocityProblem(AbstractProblem):
         if method in ("batch", "batch_window"):
             return self._fit(pixels, causal=method == "batch_window")
         if method == "ekf":
-            from ...baselines import velocity_ekf
-
             return velocity_ekf(
                 self.ts,
                 pixels,
@@ -191,7 +213,6 @@ class VelocityProblem(AbstractProblem):
     def _estimator(self, params, pixels):
         """The estimator's stream of one draw's `pixels` and the estimator at `params`
         (resolved), as `solve` runs them."""
-        from ...estimators import VelocityEstimator, velocity_stream
 
         ts = self.ts if self.times is None else self.times.array  # concrete for a held step
         stream = velocity_stream(
@@ -215,7 +236,6 @@ class VelocityProblem(AbstractProblem):
         return self._camera(inputs["pixels"])
 
     def _camera(self, pixels):
-        from ...estimators import FixedCamera, fixed_camera
 
         if self.constants == "per_draw":
             return fixed_camera(
@@ -226,15 +246,6 @@ class VelocityProblem(AbstractProblem):
         return FixedCamera(p_ref, self.A, self.R_star, self.s1, self.n_star, self.z1_star)
 
     def _fit(self, pixels, causal):
-        from ..._results import RESULTS, first_failure
-        from ...baselines import (
-            SmootherDiagnostics,
-            cauchy,
-            frame_poses,
-            half_width_for_bandwidth,
-            velocity_covariance,
-            velocity_smoother,
-        )
 
         camera = self._camera(pixels)
         poses = frame_poses(pixels, camera, loss=cauchy(ROBUST_SCALE_PX) if self.robust else None)
@@ -295,7 +306,6 @@ class VelocityProblem(AbstractProblem):
         true velocity there."""
         if self.truth is None:
             return {}
-        from ...estimators import WindowRMS
 
         w = self._window()
         rms = (
@@ -307,7 +317,6 @@ class VelocityProblem(AbstractProblem):
         """The estimator's output error $\\tilde e$ against the noise its measurements imply
         (`estimators.velocity_innovation`) over the scoring window; `None` for the
         baselines (not observers of $e$) and a solution saved without its time series."""
-        from ...estimators import velocity_innovation
 
         if method != "estimator" or getattr(solution, "diagnostics", None) is None:
             return None
@@ -378,7 +387,6 @@ class VelocityProblem(AbstractProblem):
         """Like Fig. 2 of Chitrakaran et al. (`plots.plot_velocity`): per degree of freedom
         the truth and the estimate, and their difference; the estimate alone without a
         truth."""
-        from ...plots import plot_velocity
 
         ts = solution.ts
         truth = None if self.truth is None else held(self.ts, self.truth, ts)
@@ -425,7 +433,6 @@ def velocity_problem(
     2nd-order low-pass at this cutoff (`estimators.lowpass`) before it is scored and saved
     (`visjax velocity --data FILE --filter-hz F`); its delay is `lowpass_delay(filter_hz)`.
     """
-    from ...estimators import VelocityEstimator, fixed_camera, integration_step, velocity_stream
 
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
         raise ValueError(f"`chunk` must be a positive int (frames per chunk); got {chunk!r}.")
@@ -442,8 +449,6 @@ def velocity_problem(
         known_length = (0, 2, float(jnp.linalg.norm(sc.s[0] - sc.s[2])))  # the diagonal
         source = f"section-6 simulation, {duration:g} s at {rate_hz:g} Hz"
     else:
-        from ...io import VelocityData
-
         d = VelocityData.load(data)
         ts, clean, A, R_star, s1 = (
             jnp.asarray(x, float) for x in (d.t, d.pixels, d.A, d.R_star, d.s1)

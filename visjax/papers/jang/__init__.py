@@ -53,9 +53,21 @@ from ...estimators import (
     moving_point_stream,
     run,
 )
+from ...frontend import (
+    Plane,
+    annotate_frames,
+    fiducial_marker,
+    render_planes,
+    textured_table,
+    track_marker,
+    write_video,
+)
+from ...geometry import camera_matrix, camera_matrix_lstsq
 from ...io import Outputs
-from ...sim import hold_indices, sample_times
-from ...studies import reproduction_row
+from ...kinematics import TwoLinkArm, puma560
+from ...plots import plot_camera_velocity, plot_moving_point, plot_testbed
+from ...sim import encoder_twist, follow_tool_twist, hold_indices, planar_path, sample_times
+from ...studies import reproduction_row, solution
 from .._reproduction import (
     Reproduction,
     SeedClock,
@@ -102,8 +114,6 @@ def moving_point_experiment(
     second half of the run (at the 100 Hz saved samples).
 
     **Raises:** `RuntimeError` if the run fails (its result code and sample)."""
-    from ..._results import RESULTS, result_names
-    from ...studies import solution
 
     problem = moving_point_problem(
         variant=set_name, noise_px=noise_px, duration=duration, Kc_observer=Kc_observer
@@ -304,10 +314,6 @@ def testbed(
     `track=False` skips rendering and tracking (the tracked pixels are then the exact ones).
     """
     import cv2  # noqa: F401  (the frontend needs OpenCV; fail early and clearly)
-
-    from ...frontend import Plane, fiducial_marker, render_planes, textured_table, track_marker
-    from ...kinematics import TwoLinkArm, puma560
-    from ...sim import encoder_twist, follow_tool_twist, planar_path
 
     if set_name not in SETS:
         raise ValueError(f"unknown set {set_name!r}; expected one of {list(SETS)}.")
@@ -621,8 +627,6 @@ def moving_point_reproduction(
 
     from tqdm import tqdm
 
-    from ...plots import plot_camera_velocity, plot_moving_point
-
     check_seeds(seeds, noise_px)
     names = set_names(sets)
     per_set = {}
@@ -706,7 +710,6 @@ def testbed_record(run: TestbedRun) -> dict:
 def testbed_video(run: TestbedRun, path, fps: float = 30.0) -> None:
     """The rendered frames of a set with the tracked point (green circle) and the estimate
     projected through the true camera (red cross) drawn on them, as an MP4."""
-    from ...frontend import annotate_frames, write_video
 
     K = np.asarray(KC_REFINED, float)
     est = np.asarray(run.estimate)[np.minimum(run.frame_index, run.estimate.shape[0] - 1)]
@@ -752,8 +755,6 @@ def testbed_reproduction(
     import functools
 
     from tqdm import tqdm
-
-    from ...plots import plot_testbed
 
     names = set_names(sets)
     if units not in UNITS:
@@ -823,8 +824,6 @@ def testbed_studies(runs, names, units, duration, seed, *, quiet=True, write=Non
     $v_{py}$ (exact pixels, so that only $v_{py}$ varies; `sensitivity`, Parquet and CSV).
     **Returns:** the printed lines."""
     from tqdm import tqdm
-
-    from ...geometry import camera_matrix, camera_matrix_lstsq
 
     lines = []
     base = runs.get("I.1")

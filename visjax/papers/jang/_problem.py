@@ -9,7 +9,22 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._util import Note, number_text
-from ...estimators import AbstractAdjoint, DirectAdjoint
+from ...baselines import moving_point_ekf, triangulate_point
+from ...design import certified_lipschitz, design_uio_for_motion
+from ...estimators import (
+    AbstractAdjoint,
+    DirectAdjoint,
+    MovingPointEstimator,
+    SaveAt,
+    WindowRMS,
+    integration_step,
+    moving_point_innovation,
+    moving_point_stream,
+    run,
+)
+from ...io import MovingPointData
+from ...plots import plot_moving_point
+from ...sim import add_pixel_noise, sample_times
 from ...studies import AbstractProblem, Parameter, as_default, held, noise_parameter
 from . import _scene as jang
 
@@ -85,26 +100,20 @@ class MovingPointProblem(AbstractProblem):
         }
 
     def inputs(self, key):
-        from ...sim import add_pixel_noise
 
         return {"pixels": add_pixel_noise(key, self.frame_pixels, self.noise_px)}
 
     def _window(self):
-        from ...estimators import WindowRMS
 
         return WindowRMS(*self.window_s, field="position")
 
     def _frames(self, pixels):
-        from ...estimators import moving_point_stream
-
         return moving_point_stream(
             self.frame_ts, pixels, self.frame_velocities, self.Kc, dropped="extrapolate",
             throw=False,
         )  # fmt: skip
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ...baselines import moving_point_ekf, triangulate_point
-        from ...estimators import SaveAt, moving_point_stream, run
 
         pixels = inputs["pixels"]
         if method == "estimator":
@@ -167,7 +176,6 @@ class MovingPointProblem(AbstractProblem):
         pixels), scored as the baselines are."""
         if self.truth is None:
             return {}
-        from ...estimators import WindowRMS
 
         rays = jnp.linalg.solve(
             self.Kc,
@@ -183,7 +191,6 @@ class MovingPointProblem(AbstractProblem):
         coordinates), against the noise its frames imply (`estimators.moving_point_innovation`)
         over the scoring window; `None` for the baselines and a solution saved without its
         time series."""
-        from ...estimators import moving_point_innovation
 
         if method != "estimator" or getattr(solution, "outputs", None) is None:
             return None
@@ -228,7 +235,6 @@ class MovingPointProblem(AbstractProblem):
         gains' own."""
         if self.set_name is None:
             return {}
-        from ...design import certified_lipschitz
 
         s = jang.SETS[self.set_name]
         A, C, D = np.array(s.A, float), np.eye(3)[:2], np.array(s.D, float)[:, None]
@@ -259,7 +265,6 @@ class MovingPointProblem(AbstractProblem):
         """Like Figs. 5-7 and 5-8 of Jang's thesis (`plots.plot_moving_point`): the true and
         the estimated position, and the error zoomed on the second half; the estimate
         alone without a truth."""
-        from ...plots import plot_moving_point
 
         ts = solution.ts
         truth = None if self.truth is None else held(self.truth_ts, self.truth, ts) * self.to_m
@@ -296,8 +301,6 @@ def moving_point_problem(
     `Kc_observer`: on a thesis set, the camera matrix the observer normalises the pixels
     with (default the thesis' refined least-squares one, which is also the simulated
     camera's: `jang.KC_REFINED`); a file carries its own."""
-    from ...estimators import integration_step, moving_point_stream
-    from ...sim import sample_times
 
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
@@ -306,7 +309,6 @@ def moving_point_problem(
             raise ValueError(
                 "a thesis set (`variant`, `Kc_observer`) and a data file exclude each other."
             )
-        from ...io import MovingPointData
 
         d = MovingPointData.load(data)
         observer, u, _ = moving_point_observer_for_data(d)
@@ -397,8 +399,6 @@ def moving_point_observer_for_data(data):
     **Returns:** `(observer, u, info)`: `u` (N, 6) the velocities at the frame times and
     `info` a dict (`depth_guess_m`, `D`, `design`, `unmodelled_motion`).
     """
-    from ...design import design_uio_for_motion
-    from ...estimators import MovingPointEstimator
 
     t = np.asarray(data.t, float)
     u = np.stack(

@@ -20,12 +20,14 @@ optical axis (a trajectory that does not excite the regressors).
 import jax
 import numpy as np
 
+from ..._results import RESULTS, result_names
 from ..._util import renamed
 from ...estimators import (
     pe_measure,
 )
 from ...io import Outputs
-from ...studies import reproduction_row
+from ...plots import plot_static_points
+from ...studies import reproduction_row, solution
 from .._reproduction import (
     Reproduction,
     SeedClock,
@@ -63,8 +65,6 @@ def static_points_experiment(
     (`studies.solution`), saved every 10 ms with its diagnostics.
 
     **Raises:** `RuntimeError` if the run fails (its result code and sample)."""
-    from ..._results import RESULTS, result_names
-    from ...studies import solution
 
     problem = static_points_problem(
         noise_px=noise_px, duration=duration, rate_hz=1000.0, exciting=exciting
@@ -120,8 +120,6 @@ def static_points_reproduction(
     medians (each seed's in `final_position_error_m_seeds`), `features` has a leading seed
     axis and the figure shows the medians and their 10-90 % bands."""
     import functools
-
-    from ...plots import plot_static_points
 
     check_seeds(seeds, noise_px)
     bar = stages(1 + seeds, "static_points", quiet)

@@ -11,7 +11,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._util import Frozen, Note, number_text
-from ...estimators import AbstractAdjoint, DirectAdjoint
+from ...baselines import bundle_adjustment, cauchy, static_points_ekf
+from ...estimators import (
+    AbstractAdjoint,
+    DirectAdjoint,
+    SaveAt,
+    StaticPointsEstimator,
+    Stream,
+    integration_step,
+    run,
+    static_points_stream,
+)
+from ...io import StaticPointsData
+from ...plots import plot_feature_estimates
+from ...sim import add_pixel_noise
 from ...studies import AbstractProblem, Parameter, noise_parameter
 from . import _scene as nath
 
@@ -119,7 +132,6 @@ class StaticPointsProblem(AbstractProblem):
         }
 
     def inputs(self, key):
-        from ...sim import add_pixel_noise
 
         return {"pixels": add_pixel_noise(key, self.clean, self.noise_px)}
 
@@ -128,7 +140,6 @@ class StaticPointsProblem(AbstractProblem):
         return self.ts if self.times is None else self.times.array
 
     def _estimator(self, pixels):
-        from ...estimators import StaticPointsEstimator, static_points_stream
 
         k = self.n_known
         stream = static_points_stream(
@@ -146,8 +157,6 @@ class StaticPointsProblem(AbstractProblem):
         return stream, est
 
     def solve(self, method, params, inputs, *, outputs=False):
-        from ...baselines import bundle_adjustment, cauchy, static_points_ekf
-        from ...estimators import SaveAt, run
 
         stream, est = self._estimator(inputs["pixels"])
         if method == "estimator":
@@ -256,7 +265,6 @@ class StaticPointsProblem(AbstractProblem):
     def figure(self, method, solution):
         """Each unknown feature's estimated position and, with the truth, its error
         (`plots.plot_feature_estimates`), as Nath et al. show the structure's convergence."""
-        from ...plots import plot_feature_estimates
 
         return plot_feature_estimates(
             np.asarray(solution.ts),
@@ -286,7 +294,6 @@ def static_points_problem(
     `exciting=False`: the scene's platform only moves along its optical axis (not
     persistently exciting: the structure is not recoverable). `robust`: the baselines'
     robust settings (`StaticPointsProblem`)."""
-    from ...estimators import Stream, integration_step
 
     if not (np.isfinite(noise_px) and noise_px >= 0):
         raise ValueError(f"`noise_px` must be finite and non-negative; got {noise_px!r}.")
@@ -301,7 +308,6 @@ def static_points_problem(
     else:
         if not exciting:
             raise ValueError("`exciting` chooses the project's scene; a data file has its own.")
-        from ...io import StaticPointsData
 
         d = StaticPointsData.load(data)
         ts, R_b, x_b, omega_c = (
