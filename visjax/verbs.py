@@ -565,43 +565,10 @@ def _mesh(shard: bool):
     return Mesh(np.array(jax.devices()), ("runs",))
 
 
-def _full(problem, point: dict) -> dict:
-    """A point's values broadcast to their parameters' shapes (so that points naming a
-    vector parameter by one value or by all its components stack)."""
-    specs = problem.parameters()
-    return {
-        k: np.broadcast_to(np.asarray(v, float), specs[k].value.shape) for k, v in point.items()
-    }
-
-
-def _held_out(problem, points: dict, seeds: int, chunk: int, mesh, first: int = 0):
-    """The headline metric of each named parameter point on the held-out noise seeds
-    `first + seeds, ..., first + 2 seeds - 1` (never seen by the sweep or the tuning):
-    `{name: {"params", "metric", "failed"}}` (`metric` the mean over the successful
-    seeds)."""
-    import jax.numpy as jnp
-
-    names = list(points)
-    full = [_full(problem, points[n]) for n in names]
-    params = {k: np.stack([f[k] for f in full]) for k in full[0]}
-    table = studies.sweep(
-        problem, params, jnp.arange(first + seeds, first + 2 * seeds), chunk=chunk, mesh=mesh
-    )
-    out = {}
-    for i, n in enumerate(names):
-        rows = table[table["point"] == i]
-        ok = rows["result"] == "successful"
-        out[n] = {
-            "params": {k: _py(v) for k, v in points[n].items()},
-            "metric": float(rows[ok][problem.metric].mean()) if ok.any() else float("nan"),
-            "failed": int((~ok).sum()),
-        }
-    return out
-
-
-def _py(x):
-    x = np.asarray(x, float)
-    return float(x) if x.ndim == 0 else x.tolist()
+def _held_keys(first: int, seeds: int):
+    """The held-out seeds after a study's own `first, ..., first + seeds - 1`: the next
+    `seeds`."""
+    return np.arange(first + seeds, first + 2 * seeds)
 
 
 def _grid(problem, grid):
@@ -863,7 +830,10 @@ def _sweeps(
             )
             continue
         paper = _defaults_of(p, best["params"])
-        held = _held_out(p, {"best": best["params"], "paper": paper}, seeds, chunk, mesh, seed)
+        held = studies.held_out(
+            p, {"best": best["params"], "paper": paper}, _held_keys(seed, seeds), chunk=chunk,
+            mesh=mesh,
+        )  # fmt: skip
         result = {
             "metric": p.metric,
             "best": {"params": held["best"]["params"], "metric": held["best"]["metric"]},
@@ -1008,14 +978,8 @@ def tune_command(
             progress=not quiet,
         )
         paper = _defaults_of(p, best["params"])
-        held = _held_out(
-            p,
-            {"tuned": tuned.params, "sweep best": best["params"], "paper": paper},
-            seeds,
-            chunk,
-            mesh,
-            seed,
-        )
+        points = {"tuned": tuned.params, "sweep best": best["params"], "paper": paper}
+        held = studies.held_out(p, points, _held_keys(seed, seeds), chunk=chunk, mesh=mesh)
         result = {
             "metric": p.metric,
             "best": {"params": held["tuned"]["params"], "metric": held["tuned"]["metric"]},

@@ -268,3 +268,24 @@ def test_registry():
     studies.register_problem("toy_bad", lambda: 3, replace=True)
     with pytest.raises(studies.UserCodeError, match="returned int, not a visjax.studies.Abstr"):
         studies.problem("toy_bad")
+
+
+def test_held_out_points_equal_their_evaluations_on_the_same_keys():
+    """`studies.held_out`: each named point's mean metric over the keys whose run succeeded,
+    against `evaluate` of the same point (an independent path: no sweep); a vector
+    parameter named by one value is broadcast; bad points are refused by name."""
+    problem = Mean(samples=jnp.full(8, 2.0), truth=2.0, noise=0.3, limit=2.2)
+    keys = jnp.arange(10, 16)
+    points = {"low": {"gain": 0.5, "offset": 0.0}, "high": {"gain": 4.0, "offset": (0.1, 0.0)}}
+    held = studies.held_out(problem, points, keys, chunk=4)
+    for name, point in points.items():
+        ev = studies.evaluate(problem, point, keys)
+        errors = np.asarray(ev.metrics["error"])
+        ok = np.isfinite(errors)
+        assert held[name]["failed"] == int((~ok).sum())
+        np.testing.assert_allclose(held[name]["metric"], errors[ok].mean(), rtol=1e-12)
+    assert held["high"]["params"] == {"gain": 4.0, "offset": [0.1, 0.0]}
+    with pytest.raises(ValueError, match="has no parameter \\['gane'\\]"):
+        studies.held_out(problem, {"x": {"gane": 1.0}}, keys)
+    with pytest.raises(ValueError, match="the same parameters"):
+        studies.held_out(problem, {"x": {"gain": 1.0}, "y": {"offset": 0.0}}, keys)

@@ -60,6 +60,7 @@ from ._sweep import (
     available_memory as available_memory,
     best as best,
     grid as grid,
+    held_out as held_out,
     log_axis as log_axis,
     parse_grid as parse_grid,
     random_points as random_points,

@@ -648,9 +648,68 @@ def save_table(table, out_dir) -> dict:
     return {"parquet": out / "runs.parquet", "csv": out / "runs.csv"}
 
 
+def held_out(
+    problem: AbstractProblem,
+    points: Mapping[str, Mapping[str, Any]],
+    keys,
+    *,
+    chunk: int = 64,
+    mesh=None,
+) -> dict[str, dict]:
+    """Named parameter points of `problem` measured on noise keys no study has seen: the
+    honest figure once a sweep or a tuning chose a point on keys of its own (what `visjax
+    sweep` and `visjax tune` report, on the seeds after theirs).
+
+    **Arguments:** `problem`; `points` (name -> {parameter: value}; a vector parameter may
+    be named by one value, broadcast to its shape); `keys` (as `sweep`'s: 1-D int seeds or
+    typed PRNG keys, the same for every point); `chunk`, `mesh` as `sweep`'s.
+
+    **Returns:** name -> `{"params", "metric", "failed"}`: the point as given (Python
+    numbers), the mean of the problem's headline metric over the keys whose run succeeded
+    (NaN if none did) and how many did not."""
+    if not isinstance(problem, AbstractProblem):
+        raise TypeError(f"`problem` must be a visjax.studies.AbstractProblem; got {problem!r}.")
+    names = list(points)
+    if not names:
+        raise ValueError("`points` is empty: name at least one parameter point.")
+    specs = problem.parameters()
+    full = []
+    for n in names:
+        unknown = sorted(set(points[n]) - set(specs))
+        if unknown:
+            raise ValueError(f"point {n!r}: {problem.title} has no parameter {unknown}.")
+        full.append(
+            {
+                k: np.broadcast_to(np.asarray(v, float), specs[k].value.shape)
+                for k, v in points[n].items()
+            }
+        )
+    if any(set(f) != set(full[0]) for f in full):
+        raise ValueError("every point must name the same parameters (the others: defaults).")
+    params = {k: np.stack([f[k] for f in full]) for k in full[0]}
+    table = sweep(problem, params, keys, chunk=chunk, mesh=mesh)
+    out = {}
+    for i, n in enumerate(names):
+        rows = table[table["point"] == i]
+        ok = rows["result"] == "successful"
+        out[n] = {
+            "params": {k: _python(v) for k, v in points[n].items()},
+            "metric": float(rows[ok][problem.metric].mean()) if ok.any() else float("nan"),
+            "failed": int((~ok).sum()),
+        }
+    return out
+
+
+def _python(x):
+    """A number or an array as a Python float or a (nested) list of floats."""
+    x = np.asarray(x, float)
+    return float(x) if x.ndim == 0 else x.tolist()
+
+
 __all__ = [
     "best",
     "grid",
+    "held_out",
     "log_axis",
     "parse_grid",
     "random_points",
