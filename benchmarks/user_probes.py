@@ -56,6 +56,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import types
 import zipfile
 from collections import Counter
 from collections.abc import Callable
@@ -292,12 +293,20 @@ def _summaries(folder: Path) -> list[Path]:
 
 @functools.cache
 def _schemas():
-    """`visjax/io/_outputs.py` (plain Python), loaded alone: importing `visjax` would
-    import JAX into this process."""
-    spec = importlib.util.spec_from_file_location("_visjax_outputs", ROOT / "visjax/io/_outputs.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """`visjax/io/_outputs.py` and the module it imports, `_staging.py` (plain Python),
+    loaded alone as a package of their own: importing `visjax` would import JAX into this
+    process."""
+    package = types.ModuleType("_visjax_io")
+    package.__path__ = [str(ROOT / "visjax" / "io")]
+    sys.modules["_visjax_io"] = package
+    for name in ("_staging", "_outputs"):
+        spec = importlib.util.spec_from_file_location(
+            f"_visjax_io.{name}", ROOT / "visjax" / "io" / f"{name}.py"
+        )
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module
+        spec.loader.exec_module(module)
+    return sys.modules["_visjax_io._outputs"]
 
 
 def schema_problems(folder: Path, before: dict[str, str]) -> list[str]:
