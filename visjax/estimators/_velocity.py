@@ -951,8 +951,8 @@ def velocity_innovation(
     solution,
     estimator: "VelocityEstimator",
     *,
-    t_start: float = -jnp.inf,
-    t_end: float = jnp.inf,
+    t_start: float | Float[ArrayLike, ""] = -jnp.inf,
+    t_end: float | Float[ArrayLike, ""] = jnp.inf,
     step: float | None = None,
     batch_size: int | None = None,
 ) -> Innovation:
