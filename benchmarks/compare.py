@@ -47,7 +47,7 @@ def main():
         per_noise = {}
         for noise in NOISE:
             setup = studies.problem(name, noise_px=noise)
-            records = studies.compare(setup, seeds=args.seeds)
+            records = studies.compare(setup, range(args.seeds))
             per_noise[str(noise)] = {"summary": summarise(setup, records), "records": records}
             print(f"{name} at {noise} px done", file=sys.stderr)
         report["problems"][name] = {"settings": setup.settings(), "noise_px": per_noise}

@@ -32,12 +32,12 @@ setup = papers.velocity_problem(noise_px=0.1, duration=duration)
 params = {"K_scale": np.array([0.01]), "rho_scale": np.array([0.1])}
 keys = jnp.arange(batch)
 t0 = time.perf_counter()
-table = studies.sweep(setup, params, keys, chunk=chunk)
+table = studies.sweep(setup, params, keys, study=studies.Study(chunk=chunk))
 first = time.perf_counter() - t0
 times = []
 for _ in range(repeats):
     t0 = time.perf_counter()
-    studies.sweep(setup, params, keys, chunk=chunk)
+    studies.sweep(setup, params, keys, study=studies.Study(chunk=chunk))
     times.append(time.perf_counter() - t0)
 steps = int(round(duration * 1000)) + 1
 wall = statistics.median(times)

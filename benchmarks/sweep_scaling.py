@@ -57,7 +57,8 @@ def main():
     chunks = -(-args.runs // args.chunk)
 
     def sweep(**kw):
-        return studies.sweep(problem, params, keys, chunk=args.chunk, **kw)
+        study = studies.Study(chunk=args.chunk, **kw)
+        return studies.sweep(problem, params, keys, study=study).to_pandas()
 
     reference = sweep()
     local_first, local_s = timed(sweep, args.repeats)

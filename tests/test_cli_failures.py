@@ -227,7 +227,9 @@ def test_a_comparison_too_long_is_refused_after_its_first_seed(tmp_path, capsys)
 
 
 def test_a_study_larger_than_the_memory_is_refused(no_study, monkeypatch, capsys):
-    monkeypatch.setattr(verbs, "available_memory", lambda: 100.0)  # bytes
+    from visjax.studies import _plan
+
+    monkeypatch.setattr(_plan, "available_memory", lambda: 100.0)  # bytes
     for argv in (
         ["sweep", "slow-toy", "--grid", "gain=1/2", "--seeds", "2"],
         ["tune", "slow-toy", "--grid", "gain=1/2", "--seeds", "2"],
@@ -519,7 +521,7 @@ def test_a_signal_inside_a_gc_callback_is_sent_again_not_dropped():
     signal again once the callback returned."""
     import gc
 
-    from visjax.cli import _in_gc_callback
+    from visjax.studies._study import _in_gc_callback
 
     seen = []
 

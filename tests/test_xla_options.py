@@ -88,10 +88,11 @@ def test_sweep_warns_when_the_configuration_can_hang():
         "    result: object\n"
         "    x: object\n"
         "f = lambda p, k: Sol(RESULTS.successful, p['a'] + jax.random.normal(k))\n"
+        "fp = studies.FunctionProblem(f, lambda s: {'x': s.x})\n"
         "with warnings.catch_warnings(record=True) as w:\n"
         "    warnings.simplefilter('always')\n"
-        "    studies.sweep(f, {'a': np.arange(3.0)}, np.arange(2), metrics=lambda s: {'x': s.x})\n"
-        "    studies.sweep(f, {'a': np.arange(3.0)}, np.arange(2), metrics=lambda s: {'x': s.x})\n"
+        "    studies.sweep(fp, {'a': np.arange(3.0)}, np.arange(2))\n"
+        "    studies.sweep(fp, {'a': np.arange(3.0)}, np.arange(2))\n"
         "print(sum('apply_xla_cpu_workarounds' in str(x.message) for x in w))\n"
     )
     assert _python(code).strip() == ("1" if ON_010 else "0")

@@ -3,7 +3,6 @@
 registered problem)."""
 
 import argparse
-import contextlib
 import inspect
 import math
 import os
@@ -15,8 +14,18 @@ from ._xla_workaround import apply_xla_cpu_workarounds
 from .estimators import MAX_STEPS
 from .io import DataFormatError, OutputConflictError, check_output_path, staged_output
 from .report import RunFailed
-from .studies import UserCodeError, load_module, registered, registered_reproduction
-from .verbs import MAX_RUNS, Refused, check_study, grid_size
+from .studies import (
+    MAX_RUNS,
+    Interrupted,
+    Refused,
+    UserCodeError,
+    grid_size,
+    handling_signals,
+    load_module,
+    registered,
+    registered_reproduction,
+)
+from .verbs import check_study
 
 VERBS = ("run", "compare", "sweep", "tune")
 PAPER_COMMANDS = ("velocity", "moving_point", "static_points")  # with --data: `run PROBLEM`
@@ -79,7 +88,7 @@ def _formats(text: str) -> list[str]:
 
 
 def _grid_spec(text: str) -> str:
-    """A `--grid` spec that parses (`studies.parse_grid`), of at most `verbs.MAX_RUNS`
+    """A `--grid` spec that parses (`studies.parse_grid`), of at most `studies.MAX_RUNS`
     points (counted from the text first: nothing that large is built), every value
     finite. Names and signs need the problem: `verbs.check_study`."""
 
@@ -383,7 +392,7 @@ def main(argv=None) -> int:
 
     failed = None
     try:
-        with _terminated_as_interrupt():
+        with handling_signals():
             try:
                 _check(args)
             except argparse.ArgumentTypeError as e:
@@ -413,7 +422,7 @@ def main(argv=None) -> int:
     except RuntimeError as e:  # a failed run: one line
         sys.stderr.write(f"visjax: error: {_one_line(e)}\n")
         return 1
-    except _Interrupted as e:
+    except Interrupted as e:
         where = "" if args.out is None else "; nothing was written to --out"
         sys.stderr.write(f"visjax: interrupted by {e.name}{where}\n")
         # the staging folder is gone (every `finally` ran); end at once, as a signal's
@@ -438,46 +447,6 @@ def _run(args, run_failed):
     return None
 
 
-class _Interrupted(BaseException):
-    """SIGINT or SIGTERM, raised where the command was (so that every `finally` runs: the
-    staging folder is removed)."""
-
-    def __init__(self, signum: int):
-        import signal
-
-        super().__init__(signum)
-        self.signum = int(signum)
-        self.name = signal.Signals(signum).name
-
-
-@contextlib.contextmanager
-def _terminated_as_interrupt():
-    """SIGINT and SIGTERM raise `_Interrupted` in the main thread for the block (a command
-    that handles them itself, a sweep, installs its own handlers inside); a
-    `KeyboardInterrupt` (SIGINT under a handler that raised it) becomes one too."""
-    import signal
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        if _in_gc_callback(frame):  # an exception there is printed and dropped: send again
-            threading.Timer(0.05, os.kill, (os.getpid(), signum)).start()
-            return
-        raise _Interrupted(signum)
-
-    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    except KeyboardInterrupt:
-        raise _Interrupted(signal.SIGINT) from None
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-
-
 def _user_traceback(error) -> str:
     """The traceback of an error raised in a user's code, from its first frame outside
     visjax and the import machinery (empty for none)."""
@@ -495,19 +464,6 @@ def _user_traceback(error) -> str:
     body = "".join(traceback.format_list(frames))
     last = "".join(traceback.format_exception_only(type(error), error))
     return "Traceback (most recent call last):\n" + body + last
-
-
-def _in_gc_callback(frame) -> bool:
-    """Whether `frame` runs inside a garbage collector's callback (JAX registers one),
-    where Python prints an exception with its traceback and drops it."""
-    import gc
-
-    codes = {getattr(cb, "__code__", None) for cb in gc.callbacks} - {None}
-    while frame is not None:
-        if frame.f_code in codes:
-            return True
-        frame = frame.f_back
-    return False
 
 
 def _one_line(error: Exception) -> str:

@@ -17,10 +17,7 @@ before any work (`Refused`). With a data file in one of the papers' formats, eve
 summary reports `dropped_fraction`.
 """
 
-import contextlib
-import difflib
 import functools
-import math
 import os
 import shutil
 import sys
@@ -46,40 +43,29 @@ from .plots import plot_comparison, plot_sweep, plot_tune_history, save_figure
 from .report import RunFailed
 from .studies import (
     MemoryLimitError,
+    Refused,
+    Study,
     as_json,
-    available_memory,
-    check_values,
+    check_grid,
+    check_run_count,
     clear_parts,
     find_parts,
+    grid_size,
     innovation_line,
     merge_parts,
-    parse_grid,
     quality,
     quality_line,
     read_manifest,
     registered,
     solution,
     solution_table,
+    study_runs,
 )
-
-MAX_RUNS = 10**9
-"""The most runs one study command makes (grid points x seeds, the held-out runs, the
-tuning's): far beyond any useful study, so that a count above it is a slip of the keyboard
-(refused at once, not found after hours)."""
 
 MAX_HOURS = 24.0
 """`compare`'s default limit on its run time, hours (`--max-hours`): measured on the first
 seed, a comparison estimated to take longer is refused then (a comparison is not resumable,
 unlike a sweep)."""
-
-RECORD_BYTES = 1024
-"""Memory per record of `compare` (a dict of a dozen numbers and names), bytes."""
-
-
-class Refused(ValueError):
-    """A study the command line refuses before it runs (an unknown or invalid grid
-    parameter, more than `MAX_RUNS` runs, more memory than is available): one line, exit
-    status 2."""
 
 
 def _settings(arguments: dict) -> dict:
@@ -132,111 +118,18 @@ def problems(
     return [(None, build(None))]
 
 
-def grid_size(spec: str) -> int | None:
-    """The number of points of a `--grid` spec (the product of its axes' lengths), read
-    from the text without building the grid; `None` for a spec `parse_grid` refuses."""
-    size = 1
-    for part in [p.strip() for p in spec.split(",") if p.strip()]:
-        body = part.split("=", 1)[-1]
-        try:
-            n = int(body.split(":")[2]) if ":" in body else len(body.split("/"))
-        except (ValueError, IndexError):
-            return None
-        size *= max(n, 0)
-    return size
-
-
-def _runs(command, points, seeds, steps, methods) -> int:
-    """The runs of one variant of a study: the grid over the seeds and the held-out runs
-    (sweep: the best point and the defaults; tune: also the tuned point, and `steps`
-    evaluations over the seeds); compare: every method over the seeds."""
-    if command == "compare":
-        return seeds * methods
-    if command == "sweep":
-        return points * seeds + 2 * seeds
-    return points * seeds + steps * seeds + 3 * seeds
-
-
-def _too_many(command, total, what) -> None:
-    if total > MAX_RUNS:
-        steps = ", fewer --steps" if command == "tune" else ""
-        grid = " or a coarser --grid" if command != "compare" else ""
-        raise Refused(
-            f"{command}: {what} make {total:.3g} runs, more than one command runs "
-            f"({MAX_RUNS:.0e}): use fewer --seeds{steps}{grid}"
-        )
-
-
-def _check_grid(name, problem, spec) -> dict:
-    """The grid's points, its parameter names among the problem's (the closest suggested)
-    and its values valid for them (finite; positive where the parameter must be)."""
-
-    if not spec:
-        raise Refused(f"{problem.title} has no default grid: give --grid")
-    params = parse_grid(spec)
-    specs = problem.parameters()
-    for axis in params:
-        if axis not in specs:
-            lower = {k.lower(): k for k in specs}
-            close = difflib.get_close_matches(axis.lower(), list(lower), n=1)
-            hint = f" (did you mean {lower[close[0]]!r}?)" if close else ""
-            raise Refused(
-                f"--grid: {name} has no parameter {axis!r}{hint}; its parameters: "
-                f"{', '.join(sorted(specs))}"
-            )
-    try:
-        check_values(problem, params, f"--grid ({name})")
-    except ValueError as e:
-        raise Refused(" ".join(str(e).split())) from None
-    return params
-
-
-def _input_bytes(problem) -> int:
-    """Bytes of one run's noisy inputs (`problem.inputs`, traced, not run): the least one
-    run holds."""
-    import jax
-
-    shapes = jax.eval_shape(problem.inputs, jax.random.key(0))
-    leaves = jax.tree_util.tree_leaves(shapes)
-    return int(sum(math.prod(x.shape) * np.dtype(x.dtype).itemsize for x in leaves))
-
-
-def _memory(command, problem, params, seeds, chunk, methods, slices=1) -> tuple[int, str]:
-    """A lower bound of the memory the study needs at once, before any compile, and what
-    it is made of: the noisy inputs of a chunk of runs (sweep; tune: of every seed at once,
-    its gradient step is one call) and the table of every run (8 bytes a cell; a job's
-    slice of `slices`) or `compare`'s records."""
-    per_run = _input_bytes(problem)
-    if command == "compare":
-        records = seeds * methods * RECORD_BYTES
-        return per_run + records, f"{seeds * methods} records of {RECORD_BYTES} bytes"
-    points = len(next(iter(params.values())))
-    runs = points * seeds
-    batch = min(chunk, 1 << max(0, math.ceil(math.log2(runs))))
-    columns = 6 + sum(int(np.size(problem.parameters()[k].value)) for k in params)
-    table = math.ceil(runs / slices) * columns * 8
-    need, what = (
-        batch * per_run + table,
-        (f"{batch} runs' inputs of {per_run / 2**20:.3g} MiB and a table of {runs} runs"),
-    )
-    if command == "tune" and seeds * per_run > need:
-        need, what = seeds * per_run, f"{seeds} seeds' inputs of {per_run / 2**20:.3g} MiB"
-    return need, what
-
-
 def check_study(
     command, problem, *, grid=None, seeds=1, chunk=64, steps=0, data=None, noise=0.1,
     duration=None, rate=None, variants=None, robust=False, shard=None,
 ) -> None:  # fmt: skip
     """What the command line checks of `compare`, `sweep` and `tune` before any work:
-    the run count (at most `MAX_RUNS`; first from the grid's text, before the problem is
-    built), then on the built problem (cached: the command reuses it) the grid's
-    parameter names and values (`--grid`, or the problem's default), the run count again
-    and a lower bound of the memory the study needs (the noisy inputs of a chunk, the
-    table, of the job's slice with `shard=(i, N)`), against `available_memory()`. (The
-    sweep then measures a chunk's compiled program before it runs one: `studies.sweep`'s
-    `max_memory`, for `sweep` and `tune`.) **Raises:** `Refused`, one line; what building
-    the problem raises (a data file's `DataFormatError`)."""
+    the run count (at most `studies.MAX_RUNS`; first from the grid's text, before the
+    problem is built), then on the built problem (cached: the command reuses it) the
+    grid (`studies.check_grid`: `--grid`, or the problem's default) and `studies.plan`
+    (the run count again, a lower bound of the memory against `available_memory()`, of
+    the job's slice with `shard=(i, N)`). (The sweep then measures a chunk's compiled
+    program before it runs one: `Study.max_memory`.) **Raises:** `Refused`, one line; what
+    building the problem raises (a data file's `DataFormatError`)."""
     if command not in ("compare", "sweep", "tune"):
         return
     count = 1 if grid is None else grid_size(grid)
@@ -244,27 +137,19 @@ def check_study(
     if count is not None:
         points = f"{count} grid points x {seeds} seeds" if grid else f"{seeds} seeds"
         points += f" and {steps} steps" if command == "tune" else ""
-        _too_many(command, n_variants * _runs(command, count, seeds, steps, 1), points)
-
+        check_run_count(command, n_variants * study_runs(command, count, seeds, steps), points)
     entry = registered(problem)
     every = command != "compare"
     built = problems(entry.name, data, noise, duration, rate, variants, every, robust)
-    limit = available_memory()
+    study = Study(chunk=chunk, shard=shard if isinstance(shard, tuple) else None)
     total = 0
     for tag, p in built:
         where = entry.name if tag is None else f"{entry.name} [{tag}]"
-        params = {} if command == "compare" else _check_grid(where, p, grid or p.grid)
-        count = len(next(iter(params.values()))) if params else 1
-        total += _runs(command, count, seeds, steps, len(p.methods))
-        slices = shard[1] if isinstance(shard, tuple) else 1
-        need, what = _memory(command, p, params, seeds, chunk, len(p.methods), slices)
-        if limit is not None and need > limit:
-            raise Refused(
-                f"{command} {where}: needs at least {need / 2**20:.0f} MiB ({what}), more "
-                f"than the {limit / 2**20:.0f} MiB available to it (80% of the memory "
-                "available now): use a smaller --chunk, fewer --seeds or a coarser --grid"
-            )
-    _too_many(command, total, f"{len(built)} problem(s), their grids and {seeds} seeds")
+        params = None if command == "compare" else check_grid(p, grid or p.grid, where)
+        found = studies.plan(p, params, seeds, study, kind=command, steps=steps)
+        found.check(where)
+        total += found.runs
+    check_run_count(command, total, f"{len(built)} problem(s), their grids and {seeds} seeds")
 
 
 def _folder(out, tag):
@@ -477,9 +362,8 @@ def compare_command(
         problem, data, noise, duration, rate, variants, every=False, robust=robust
     ):
         try:
-            records = studies.compare(
-                p, seeds=seeds, first_seed=seed, progress=not quiet, max_seconds=max_hours * 3600
-            )
+            study = Study(progress=not quiet, max_seconds=max_hours * 3600)
+            records = studies.compare(p, np.arange(seed, seed + seeds), study=study)
         except studies.StudyTooLong as e:
             where = problem if tag is None else f"{problem} [{tag}]"
             raise Refused(f"compare {where}: {e}: use fewer --seeds or raise --max-hours") from None
@@ -571,43 +455,24 @@ def _held_keys(first: int, seeds: int):
     return np.arange(first + seeds, first + 2 * seeds)
 
 
-def _grid(problem, grid):
-
+def _selected(problem, grid, seeds, first, study, tune=None):
+    """The command's sweep then its held-out measure (`tune`: `(optimiser, steps)`, then
+    `studies.sweep_then_tune`): `(spec, selection)`; with a job slice, the slice's
+    `SweepResult` (no best: that needs every run, after `visjax merge`)."""
     spec = grid or getattr(problem, "grid", "")
     if not spec:
         raise ValueError(f"{problem.title} has no default grid: give --grid")
-    return spec, studies.parse_grid(spec)
-
-
-def _one_sweep(problem, grid, seeds, chunk, mesh, quiet, first: int = 0, **durable):
-    """The sweep of the command (`durable`: `parts`, `resume`, `shard`, `executor`,
-    `max_memory`, `log` of `studies.sweep`); with a job slice (`shard`), the slice's rows
-    only (no summary nor best: those need every run, after `visjax merge`)."""
-    import jax.numpy as jnp
-
-    spec, params = _grid(problem, grid)
+    points = studies.parse_grid(spec)
+    keys, held = np.arange(first, first + seeds), _held_keys(first, seeds)
     try:
-        table = studies.sweep(
-            problem,
-            params,
-            jnp.arange(first, first + seeds),
-            chunk=chunk,
-            mesh=mesh,
-            progress=not quiet,
-            **durable,
-        )
-    except ValueError as e:  # the sweep's own memory check (XLA's analysis of a chunk)
-        if durable.get("max_memory") is not None and isinstance(e, MemoryLimitError):
-            raise Refused(str(e)) from None
-        raise
-    if durable.get("shard") is not None:
-        return spec, table, None, None
-    return (
-        spec,
-        table,
-        studies.summarise(table, problem.metric),
-        studies.best(table, problem.metric),
-    )
+        if tune is not None:
+            optimiser, steps = tune
+            return spec, studies.sweep_then_tune(
+                problem, points, keys, held, optimiser=optimiser, steps=steps, study=study
+            )
+        return spec, studies.sweep_then_hold_out(problem, points, keys, held, study=study)
+    except MemoryLimitError as e:  # the sweep's own memory check (XLA's analysis of a chunk)
+        raise Refused(str(e)) from None
 
 
 def _job_slice(shard):
@@ -663,43 +528,6 @@ def _refuse_finished(folder: Path, parts: Path, resume: bool, force: bool) -> No
         )
 
 
-class _Signals:
-    """SIGINT and SIGTERM during a sweep: the first asks it to stop after the chunk in
-    flight (`requested`, the sweep's `stop`), so that no chunk is cut in the middle of a
-    compiled call; a second stops it at once (KeyboardInterrupt)."""
-
-    def __init__(self):
-        self.requested = False
-
-    def __call__(self) -> bool:
-        return self.requested
-
-    def handler(self, signum, frame):
-        if self.requested:
-            raise KeyboardInterrupt()
-        self.requested = True
-        sys.stderr.write("visjax: stopping after the chunk in flight (again: at once)\n")
-
-
-@contextlib.contextmanager
-def _interruptible():
-    """SIGINT and SIGTERM handled by a `_Signals` inside the block (main thread only;
-    elsewhere nothing changes and the block gets a `_Signals` that never asks)."""
-    import signal
-    import threading
-
-    signals = _Signals()
-    if threading.current_thread() is not threading.main_thread():
-        yield signals
-        return
-    previous = {s: signal.signal(s, signals.handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield signals
-    finally:
-        for s, h in previous.items():
-            signal.signal(s, h)
-
-
 def _saved_runs(parts: Path) -> tuple[int, int]:
 
     try:
@@ -708,11 +536,6 @@ def _saved_runs(parts: Path) -> tuple[int, int]:
         return 0, 0
     n, chunk = m["n_runs"], m["chunk"]
     return sum(min(chunk, n - c * chunk) for c in m["done"]), n
-
-
-def _defaults_of(problem, names) -> dict:
-    """The defaults (the paper's values) of the grid's parameters."""
-    return {k: problem.parameters()[k].value for k in names}
 
 
 def _print_result(tag, problem, held, extra=""):
@@ -797,43 +620,41 @@ def _sweeps(
         if not p.scored:
             raise ValueError(f"{p.title}: a sweep needs the truth (the data file has none)")
         folder = _folder(out, tag)
-        durable = {"shard": job, "executor": executor, "log": say, "max_memory": "available"}
+        parts = None
         if folder is not None:
             parts = _parts_folder(folder, job)
             _refuse_finished(folder, parts, resume, force)
-            durable.update(parts=parts, resume=resume)
         try:
-            with _interruptible() as signals:
-                spec, table, summary, best = _one_sweep(
-                    p, grid, seeds, chunk, mesh, quiet, seed, stop=signals, **durable
-                )
+            with studies.interruptible() as stop:
+                study = studies.Study(
+                    chunk=chunk, mesh=mesh, shard=job, executor=executor, parts=parts,
+                    resume=resume and parts is not None, max_memory="available",
+                    progress=not quiet, log=say, stop=stop,
+                )  # fmt: skip
+                spec, found = _selected(p, grid, seeds, seed, study)
         except KeyboardInterrupt:
             if folder is None:
                 raise
-            done, n = _saved_runs(durable["parts"])
+            done, n = _saved_runs(parts)
             sys.stderr.write(
-                f"visjax: interrupted: {done} of {n} runs are saved in {durable['parts']}; "
+                f"visjax: interrupted: {done} of {n} runs are saved in {parts}; "
                 "run the same command with --resume to continue\n"
             )
             raise SystemExit(130) from None
         head = f"[{tag}] " if tag else ""
         if job is not None:
             print(
-                f"{head}shard {job[0]}/{job[1]}: {len(table)} runs written to "
-                f"{durable['parts']}; when every shard is done: visjax merge DIR... --out OUT"
+                f"{head}shard {job[0]}/{job[1]}: {len(found)} runs written to "
+                f"{parts}; when every shard is done: visjax merge DIR... --out OUT"
             )
-            body = {"runs": len(table), "shard": list(job), "parts": str(durable["parts"])}
+            body = {"runs": len(found), "shard": list(job), "parts": str(parts)}
             # not written into the variant's folder: that would replace the folder, and the
             # other slices' parts in it, when the outputs move into place
             results[tag] = command_summary(
                 "sweep_shard", body, settings=settings, seed=seed, started=started, out=None
             )
             continue
-        paper = _defaults_of(p, best["params"])
-        held = studies.held_out(
-            p, {"best": best["params"], "paper": paper}, _held_keys(seed, seeds), chunk=chunk,
-            mesh=mesh,
-        )  # fmt: skip
+        table, summary, best, held = found.sweep, found.summary, found.best, found.held
         result = {
             "metric": p.metric,
             "best": {"params": held["best"]["params"], "metric": held["best"]["metric"]},
@@ -870,7 +691,7 @@ def _sweeps(
             )
             # the parts come along with the other outputs (a copy: until the outputs are
             # in place, the parts where they were written stay whole)
-            shutil.copytree(durable["parts"], folder / "parts", dirs_exist_ok=True)
+            shutil.copytree(parts, folder / "parts", dirs_exist_ok=True)
         results[tag] = command_summary(
             "sweep", result, settings=settings, seed=seed, started=started, out=folder
         )
@@ -953,7 +774,6 @@ def tune_command(
     `history.csv`, `sweep.png`, `tune.png` and `summary.json` (kind `tune`)."""
     started = time.perf_counter()
     settings = _settings(locals())
-    import jax.numpy as jnp
     import optax
     import pandas as pd
 
@@ -965,21 +785,15 @@ def tune_command(
     for tag, p in problems(problem, data, noise, duration, rate, variants, robust=robust):
         if not p.scored:
             raise ValueError(f"{p.title}: tuning needs the truth (the data file has none)")
-        spec, table, summary, best = _one_sweep(
-            p, grid, seeds, chunk, mesh, quiet, seed, max_memory="available",
+        study = studies.Study(
+            chunk=chunk, mesh=mesh, max_memory="available", progress=not quiet,
             log=None if quiet else print,
         )  # fmt: skip
-        tuned = studies.tune(
-            p,
-            best["params"],
-            jnp.arange(seed, seed + seeds),
-            optimiser=optax.adam(learning_rate),
-            steps=steps,
-            progress=not quiet,
-        )
-        paper = _defaults_of(p, best["params"])
-        points = {"tuned": tuned.params, "sweep best": best["params"], "paper": paper}
-        held = studies.held_out(p, points, _held_keys(seed, seeds), chunk=chunk, mesh=mesh)
+        optimiser = (optax.adam(learning_rate), steps)
+        spec, found = _selected(p, grid, seeds, seed, study, tune=optimiser)
+        table, summary, best, held, tuned = (
+            found.sweep, found.summary, found.best, found.held, found.tuned,
+        )  # fmt: skip
         result = {
             "metric": p.metric,
             "best": {"params": held["tuned"]["params"], "metric": held["tuned"]["metric"]},

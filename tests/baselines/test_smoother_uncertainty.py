@@ -181,7 +181,7 @@ def test_velocity_problem_uncertainty_and_robust_settings():
 @pytest.mark.slow  # four methods compiled: about 40 s on 2 cores
 def test_compare_reports_the_velocity_predicted_spread():
     problem = papers.velocity_problem(noise_px=0.5, duration=0.2)
-    records = studies.compare(problem, seeds=2, repeats=1)
+    records = studies.compare(problem, range(2), study=studies.Study(repeats=1))
     by = {(r["method"], r["seed"]): r for r in records}
     for seed in (0, 1):
         for method in ("batch", "batch_window"):

@@ -206,7 +206,7 @@ def test_compare_reports_the_predicted_spread():
     least-squares baseline (and the EKF where it succeeds: its own inverse-depth variance),
     `None` for the observer, which predicts none."""
     problem = spica.point_depth_problem(noise_px=0.5, duration=0.3, rate_hz=100.0, window_s=0.1)
-    records = studies.compare(problem, seeds=2, repeats=1)
+    records = studies.compare(problem, range(2), study=studies.Study(repeats=1))
     for r in records:
         if r["method"] == "estimator":
             assert r["depth_error_std"] is None

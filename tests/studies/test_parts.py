@@ -37,13 +37,15 @@ def points():
 @pytest.fixture(scope="module")
 def whole(problem, points):
     """50 points x 6 seeds = 300 runs in chunks of 32 (10 chunks, the last partial)."""
-    return studies.sweep(problem, points, jnp.arange(6), chunk=32)
+    return studies.sweep(problem, points, jnp.arange(6), study=studies.Study(chunk=32)).to_pandas()
 
 
 def test_any_subset_of_runs_reproduces_its_rows(problem, points, whole):
     """Run i's noise comes from its seed's key alone: runs 100-199 computed alone (other
     chunks, other batch sizes), or in reverse order, equal those rows of the whole sweep."""
-    alone = studies.sweep(problem, points, jnp.arange(6), chunk=16, runs=range(199, 99, -1))
+    alone = studies.sweep(
+        problem, points, jnp.arange(6), study=studies.Study(chunk=16, runs=range(199, 99, -1))
+    ).to_pandas()
     assert list(alone["run"]) == list(range(100, 200))
     rows = whole.iloc[100:200].reset_index(drop=True)
     pd.testing.assert_frame_equal(alone, rows, check_exact=False, rtol=1e-12, atol=0.0)
@@ -59,7 +61,9 @@ def test_parts_resume_and_refusals(tmp_path, problem, points, whole):
     the uninterrupted one exactly; a folder with parts is refused without `resume`, and one
     holding another sweep's parts always."""
     folder = tmp_path / "parts"
-    table = studies.sweep(problem, points, jnp.arange(6), chunk=32, parts=folder)
+    table = studies.sweep(
+        problem, points, jnp.arange(6), study=studies.Study(chunk=32, parts=folder)
+    ).to_pandas()
     pd.testing.assert_frame_equal(table, whole)
     manifest = json.loads((folder / "manifest.json").read_text())
     assert manifest["done"] == list(range(10)) and manifest["n_runs"] == 300
@@ -67,13 +71,17 @@ def test_parts_resume_and_refusals(tmp_path, problem, points, whole):
     for c in (3, 9):  # as if the sweep had been killed before writing these
         (folder / part_name(c)).unlink()
     with pytest.raises(studies.PartsError, match="resume"):
-        studies.sweep(problem, points, jnp.arange(6), chunk=32, parts=folder)
-    resumed = studies.sweep(problem, points, jnp.arange(6), chunk=32, parts=folder, resume=True)
+        studies.sweep(problem, points, jnp.arange(6), study=studies.Study(chunk=32, parts=folder))
+    resumed = studies.sweep(
+        problem, points, jnp.arange(6), study=studies.Study(chunk=32, parts=folder, resume=True)
+    ).to_pandas()
     pd.testing.assert_frame_equal(resumed, whole)
     with pytest.raises(studies.PartsError, match="different sweep"):
-        studies.sweep(problem, points, jnp.arange(5), chunk=32, parts=folder, resume=True)
-    with pytest.raises(ValueError, match="`runs`"):
-        studies.sweep(problem, points, jnp.arange(6), runs=[1], parts=folder)
+        studies.sweep(
+            problem, points, jnp.arange(5), study=studies.Study(chunk=32, parts=folder, resume=True)
+        )
+    with pytest.raises(ValueError, match="runs"):
+        studies.sweep(problem, points, jnp.arange(6), study=studies.Study(runs=[1], parts=folder))
 
 
 def test_job_slices_merge_and_their_errors(tmp_path, problem, points, whole):
@@ -82,7 +90,9 @@ def test_job_slices_merge_and_their_errors(tmp_path, problem, points, whole):
     folders = []
     for i in range(3):
         f = tmp_path / f"shard{i}"
-        part = studies.sweep(problem, points, jnp.arange(6), chunk=32, parts=f, shard=(i, 3))
+        part = studies.sweep(
+            problem, points, jnp.arange(6), study=studies.Study(chunk=32, parts=f, shard=(i, 3))
+        ).to_pandas()
         assert set(part["run"] // 32 % 3) == {i}
         folders.append(f)
     table, manifest = studies.merge_parts(folders)
@@ -90,11 +100,15 @@ def test_job_slices_merge_and_their_errors(tmp_path, problem, points, whole):
     with pytest.raises(studies.PartsError, match=r"3 of 10 chunks are missing \(chunks 1, 4, 7\)"):
         studies.merge_parts(folders[::2])
     twice = tmp_path / "again"
-    studies.sweep(problem, points, jnp.arange(6), chunk=32, parts=twice, shard=(1, 3))
+    studies.sweep(
+        problem, points, jnp.arange(6), study=studies.Study(chunk=32, parts=twice, shard=(1, 3))
+    )
     with pytest.raises(studies.PartsError, match="found twice"):
         studies.merge_parts([*folders, twice])
     other = tmp_path / "other"
-    studies.sweep(problem, points, jnp.arange(5), chunk=32, parts=other, shard=(0, 3))
+    studies.sweep(
+        problem, points, jnp.arange(5), study=studies.Study(chunk=32, parts=other, shard=(0, 3))
+    )
     with pytest.raises(studies.PartsError, match="different sweep"):
         studies.merge_parts([folders[0], other])
 
@@ -111,9 +125,9 @@ def test_altered_foreign_or_truncated_parts_are_recomputed_or_refused(
     import pyarrow.parquet as pq
 
     folder = tmp_path / "parts"
-    studies.sweep(problem, points, jnp.arange(6), chunk=32, parts=folder)
+    studies.sweep(problem, points, jnp.arange(6), study=studies.Study(chunk=32, parts=folder))
     other = tmp_path / "other"
-    studies.sweep(problem, points, jnp.arange(1, 7), chunk=32, parts=other)
+    studies.sweep(problem, points, jnp.arange(1, 7), study=studies.Study(chunk=32, parts=other))
     saved = {c: (folder / part_name(c)).read_bytes() for c in range(10)}
 
     def copied_over():
@@ -137,8 +151,11 @@ def test_altered_foreign_or_truncated_parts_are_recomputed_or_refused(
             studies.merge_parts([folder])
         lines = []
         resumed = studies.sweep(
-            problem, points, jnp.arange(6), chunk=32, parts=folder, resume=True, log=lines.append
-        )
+            problem,
+            points,
+            jnp.arange(6),
+            study=studies.Study(chunk=32, parts=folder, resume=True, log=lines.append),
+        ).to_pandas()
         pd.testing.assert_frame_equal(resumed, whole)
         assert any(part_name(chunk) in ln and "recomputed" in ln for ln in lines), lines
         table, _ = studies.merge_parts([folder])
@@ -154,7 +171,10 @@ def test_altered_foreign_or_truncated_parts_are_recomputed_or_refused(
         for call in (
             lambda: studies.merge_parts([folder]),
             lambda: studies.sweep(
-                problem, points, jnp.arange(6), chunk=32, parts=folder, resume=True
+                problem,
+                points,
+                jnp.arange(6),
+                study=studies.Study(chunk=32, parts=folder, resume=True),
             ),
         ):
             with pytest.raises(studies.PartsError, match=f"manifest.json: .*{says}"):
@@ -166,7 +186,12 @@ def test_memory_estimate_refuses_a_chunk_too_large(problem, points):
     run, naming a chunk that fits."""
     lines = []
     with pytest.raises(ValueError, match=r"use a chunk of at most \d+ runs"):
-        studies.sweep(problem, points, jnp.arange(6), chunk=32, max_memory=100, log=lines.append)
+        studies.sweep(
+            problem,
+            points,
+            jnp.arange(6),
+            study=studies.Study(chunk=32, max_memory=100, log=lines.append),
+        )
     assert lines and lines[0].startswith("memory per chunk of 32 runs:")
 
 
@@ -239,7 +264,9 @@ def test_ray_executor_equals_one_process_and_survives_a_killed_worker(tmp_path):
 
     problem = slow_toy()
     points = {"gain": np.geomspace(0.1, 10.0, 24)}
-    expected = studies.sweep(problem, points, jnp.arange(2), chunk=4)
+    expected = studies.sweep(
+        problem, points, jnp.arange(2), study=studies.Study(chunk=4)
+    ).to_pandas()
     executor = studies.RayExecutor(num_cpus=2, max_retries=3)
     try:
         parts = tmp_path / "parts"
@@ -259,12 +286,17 @@ def test_ray_executor_equals_one_process_and_survives_a_killed_worker(tmp_path):
         killer = threading.Thread(target=kill_a_worker, daemon=True)
         killer.start()
         table = studies.sweep(
-            problem, points, jnp.arange(2), chunk=4, executor=executor, parts=parts
-        )
+            problem,
+            points,
+            jnp.arange(2),
+            study=studies.Study(chunk=4, executor=executor, parts=parts),
+        ).to_pandas()
         killer.join(timeout=5)
         assert killed, "no worker was killed: the test did not test the retry"
         pd.testing.assert_frame_equal(table, expected)
-        again = studies.sweep(problem, points, jnp.arange(2), chunk=4, executor=executor)
+        again = studies.sweep(
+            problem, points, jnp.arange(2), study=studies.Study(chunk=4, executor=executor)
+        ).to_pandas()
         pd.testing.assert_frame_equal(again, expected)
     finally:
         executor.shutdown()

@@ -142,7 +142,7 @@ def test_failed_runs_flagged_never_scored():
 def test_sweep_rows_equal_evaluate_and_values_checked():
     p = toy(limit=2.3)
     points = {"gain": np.array([0.5, 1.0, 4.0]), "offset": np.array([0.0, 0.0, 0.5])}
-    table = studies.sweep(p, points, jnp.arange(2))
+    table = studies.sweep(p, points, jnp.arange(2)).to_pandas()
     assert list(table.columns[:5]) == ["run", "point", "gain", "offset", "seed"]
     for _, row in table.iterrows():
         ev = studies.evaluate(p, {"gain": row["gain"], "offset": row["offset"]},
@@ -154,7 +154,9 @@ def test_sweep_rows_equal_evaluate_and_values_checked():
             np.testing.assert_allclose(row["error"], ev.metrics["error"][0], rtol=1e-12)
             np.testing.assert_allclose(row["both[1]"], row["error"] ** 2, rtol=1e-12)
     # the baseline ignores the parameters
-    base = studies.sweep(p, {"gain": np.array([0.5, 4.0])}, jnp.arange(1), method="baseline")
+    base = studies.sweep(
+        p, {"gain": np.array([0.5, 4.0])}, jnp.arange(1), method="baseline"
+    ).to_pandas()
     assert base["error"].nunique() == 1
     # values checked before any run: positivity, finiteness, names
     for bad, match in (
@@ -172,7 +174,7 @@ def test_rebuilt_problem_with_equal_fields_does_not_recompile():
     points = {"gain": np.array([0.5, 1.0])}
     studies.sweep(toy(), points, jnp.arange(2))
     n = TRACES["n"]
-    again = studies.sweep(toy(), points, jnp.arange(2))  # a new, equal problem
+    again = studies.sweep(toy(), points, jnp.arange(2)).to_pandas()  # a new, equal problem
     assert TRACES["n"] == n and (again["result"] == "successful").all()
     assert studies.fingerprint(toy()) == studies.fingerprint(toy())
     assert studies.fingerprint(toy()) != studies.fingerprint(toy(noise=0.2))
@@ -182,7 +184,7 @@ def test_rebuilt_problem_with_equal_fields_does_not_recompile():
 
 def test_compare_over_a_problem():
     p = toy(limit=2.05)
-    records = studies.compare(p, seeds=2, repeats=1, params={"gain": 3.0})
+    records = studies.compare(p, range(2), params={"gain": 3.0}, study=studies.Study(repeats=1))
     assert [(r["method"], r["seed"]) for r in records] == [
         ("estimator", 0), ("baseline", 0), ("estimator", 1), ("baseline", 1)
     ]  # fmt: skip
@@ -193,7 +195,7 @@ def test_compare_over_a_problem():
                 assert r["error"] == pytest.approx(by_hand(p, 3.0, (0, 0), r["seed"]), rel=1e-12)
         else:
             assert r["error"] is None and r["both"] is None  # never a failed run's numbers
-    with pytest.raises(ValueError, match="inputs"):
+    with pytest.raises(ValueError, match="inputs"), pytest.warns(FutureWarning):
         studies.compare(p, lambda k: k, seeds=1)
 
 
@@ -277,7 +279,7 @@ def test_held_out_points_equal_their_evaluations_on_the_same_keys():
     problem = Mean(samples=jnp.full(8, 2.0), truth=2.0, noise=0.3, limit=2.2)
     keys = jnp.arange(10, 16)
     points = {"low": {"gain": 0.5, "offset": 0.0}, "high": {"gain": 4.0, "offset": (0.1, 0.0)}}
-    held = studies.held_out(problem, points, keys, chunk=4)
+    held = studies.held_out(problem, points, keys, study=studies.Study(chunk=4))
     for name, point in points.items():
         ev = studies.evaluate(problem, point, keys)
         errors = np.asarray(ev.metrics["error"])

@@ -64,8 +64,11 @@ def test_grid_helpers():
 
 def test_table_rows_flags_and_summary(tmp_path):
     table = studies.sweep(
-        toy, studies.grid(a=[1.0, 2.0, 4.0, 6.0]), jnp.arange(3), metrics=toy_metrics, chunk=5
-    )
+        studies.FunctionProblem(toy, toy_metrics),
+        studies.grid(a=[1.0, 2.0, 4.0, 6.0]),
+        jnp.arange(3),
+        study=studies.Study(chunk=5),
+    ).to_pandas()
     assert len(table) == 12 and list(table["seed"][:4]) == [0, 1, 2, 0]
     assert list(table.columns[:4]) == ["run", "point", "a", "seed"]
     assert {"result", "failed_sample", "m", "v[0]", "v[2]"} <= set(table.columns)
@@ -96,11 +99,20 @@ def test_table_rows_flags_and_summary(tmp_path):
 
 def test_bad_arguments():
     with pytest.raises(ValueError, match="leading axis"):
-        studies.sweep(toy, {"a": jnp.ones(3), "b": jnp.ones(2)}, jnp.arange(2), metrics=toy_metrics)
+        studies.sweep(
+            studies.FunctionProblem(toy, toy_metrics),
+            {"a": jnp.ones(3), "b": jnp.ones(2)},
+            jnp.arange(2),
+        )
     with pytest.raises(ValueError, match="seeds"):
-        studies.sweep(toy, {"a": jnp.ones(3)}, jnp.ones(2), metrics=toy_metrics)
+        studies.sweep(studies.FunctionProblem(toy, toy_metrics), {"a": jnp.ones(3)}, jnp.ones(2))
     with pytest.raises(ValueError, match="chunk"):
-        studies.sweep(toy, {"a": jnp.ones(3)}, jnp.arange(2), metrics=toy_metrics, chunk=0)
+        studies.sweep(
+            studies.FunctionProblem(toy, toy_metrics),
+            {"a": jnp.ones(3)},
+            jnp.arange(2),
+            study=studies.Study(chunk=0),
+        )
 
 
 # The velocity estimator, 2 s of the section-6 simulation at 1 kHz, 0.1 px noise: one
@@ -115,7 +127,7 @@ def velocity():
 @pytest.mark.slow
 def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
     params = {"K_scale": jnp.array([0.01, 1.0, 10.0]), "rho_scale": jnp.array([0.1, 1.0, 1.0])}
-    table = studies.sweep(velocity, params, jnp.arange(2))
+    table = studies.sweep(velocity, params, jnp.arange(2)).to_pandas()
 
     # evaluate closes over the problem (its arrays are the scene's constants): jit the
     # function of the parameters
@@ -301,7 +313,7 @@ def test_two_processes_with_jax_distributed(velocity):
     sharded = pd.read_json(io.StringIO(results[0]["table"]))
     # the unsharded sweep of the module's test above (same problem, same compiled chunk)
     params = {"K_scale": np.array([0.01, 1.0, 10.0]), "rho_scale": np.array([0.1, 1.0, 1.0])}
-    plain = studies.sweep(velocity, params, jnp.arange(2))
+    plain = studies.sweep(velocity, params, jnp.arange(2)).to_pandas()
     assert list(sharded["result"]) == list(plain["result"])
     assert list(plain["result"][-2:]) == ["unstable_step"] * 2
     np.testing.assert_allclose(sharded["rms_worst"], plain["rms_worst"], rtol=1e-12)
@@ -324,9 +336,8 @@ def test_tune_finds_minimum_in_log_parameters(method):
     import optimistix as optx
 
     opt = optax.adam(0.2) if method == "optax" else optx.BFGS(rtol=1e-8, atol=1e-10)
-    r = studies.tune(
-        bowl, {"a": 1.0, "b": 1.0}, lambda s: s.value, jnp.arange(2), optimiser=opt, steps=100
-    )
+    problem = studies.FunctionProblem(bowl, lambda s: {"value": s.value}, metric="value")
+    r = studies.tune(problem, {"a": 1.0, "b": 1.0}, jnp.arange(2), optimiser=opt, steps=100)
     tol = 1e-2 if method == "optax" else 1e-5  # adam's fixed steps jitter around the minimum
     assert r.params["a"] == pytest.approx(3.0, rel=tol)
     assert r.params["b"] == pytest.approx(np.exp(-1.0), rel=tol)
@@ -348,7 +359,7 @@ def test_velocity_sweep_on_a_data_file_with_dropouts(tmp_path):
         setup,
         {"K_scale": jnp.array([0.01, 0.1]), "rho_scale": jnp.array([0.1, 0.1])},
         jnp.arange(2),
-    )
+    ).to_pandas()
     assert (table["result"] == "successful").all()
     assert np.isfinite(table["rms_worst"]).all() and (table["rms_worst"] > 0).all()
 

@@ -76,7 +76,7 @@ def test_a_noise_sweep_is_one_compiled_program(two_files):
     problem, _ = two_files
     levels = np.array([0.0, 0.05, 0.1, 0.3])
     with compiles() as names:
-        table = studies.sweep(problem, {"noise_px": levels}, np.arange(2))
+        table = studies.sweep(problem, {"noise_px": levels}, np.arange(2)).to_pandas()
     assert names.count("jit(one)") == 1  # the chunk's vmapped run
     with compiles() as names:
         studies.sweep(problem, {"noise_px": levels[::-1] * 2}, np.arange(2))

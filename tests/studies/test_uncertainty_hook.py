@@ -14,7 +14,7 @@ from visjax.papers import hamel
 @pytest.mark.slow  # four methods compiled; point-depth's compare test is in the unit tier
 def test_compare_reports_the_static_points_predicted_spread():
     problem = papers.static_points_problem(noise_px=0.5, duration=2.0, rate_hz=20.0)
-    records = studies.compare(problem, seeds=2, repeats=1)
+    records = studies.compare(problem, range(2), study=studies.Study(repeats=1))
     by = {(r["method"], r["seed"]): r for r in records}
     n = len(by[("batch", 0)]["error"])
     for method in ("batch", "batch_window", "ekf"):

@@ -81,7 +81,14 @@ from ..geometry import (
 from ..io import Outputs
 from ..plots import plot_comparison
 from ..sim import sample_times
-from ..studies import AbstractProblem, Parameter, compare, noise_parameter, reproduction_row
+from ..studies import (
+    AbstractProblem,
+    Parameter,
+    Study,
+    compare,
+    noise_parameter,
+    reproduction_row,
+)
 from ._reproduction import Reproduction, write_report
 from .chitrakaran import velocity_problem
 
@@ -713,7 +720,8 @@ def reproduce_homography(
         problem = homography_problem(
             noise_px=noise, duration=duration, variant="velocity_front_end"
         )
-        records = compare(problem, seeds=seeds, first_seed=seed, progress=not quiet)
+        keys = np.arange(seed, seed + seeds)
+        records = compare(problem, keys, study=Study(progress=not quiet))
         metric = problem.metric
         trivial = float(problem.trivial()[metric])
         per = {}

@@ -1,13 +1,20 @@
 """Generic studies over any problem: `AbstractProblem` (one definition of "estimate X from
-Y": inputs, methods, parameters, metrics, figure), `evaluate` (one parameter point over
-noise keys, differentiable), `compare` (every method on identical inputs), `sweep`
-(batched over parameter points and noise seeds) and `tune` (gradient-based), and the
-registry of problems the command line's `run|compare|sweep|tune` verbs look up.
+Y": inputs, methods, parameters, metrics, figure; a plain function joins as a
+`FunctionProblem`), `evaluate` (one parameter point over noise keys, differentiable),
+`compare` (every method on identical inputs), `sweep` (batched over parameter points and
+noise keys), `tune` (gradient-based) and `held_out`, each `(problem, ..., keys, *,
+study=Study(...))` and returning a `Result` (`.to_pandas()`); `plan` (a study's runs and
+memory before it runs); the registries of problems and reproductions the command line
+looks up.
 
 The papers' problems live in `visjax.papers`.
 """
 
-from ._compare import StudyTooLong as StudyTooLong, compare as compare
+from ._compare import (
+    Comparison as Comparison,
+    StudyTooLong as StudyTooLong,
+    compare as compare,
+)
 from ._executors import RayExecutor as RayExecutor
 from ._parts import (
     PartsError as PartsError,
@@ -16,11 +23,25 @@ from ._parts import (
     merge_parts as merge_parts,
     read_manifest as read_manifest,
 )
+from ._plan import (
+    MAX_RUNS as MAX_RUNS,
+    Plan as Plan,
+    Refused as Refused,
+    Selection as Selection,
+    check_grid as check_grid,
+    check_run_count as check_run_count,
+    grid_size as grid_size,
+    plan as plan,
+    study_runs as study_runs,
+    sweep_then_hold_out as sweep_then_hold_out,
+    sweep_then_tune as sweep_then_tune,
+)
 from ._problem import (
     INNOVATION_GATE as INNOVATION_GATE,
     QUALITY_RATIO as QUALITY_RATIO,
     AbstractProblem as AbstractProblem,
     Evaluation as Evaluation,
+    FunctionProblem as FunctionProblem,
     Parameter as Parameter,
     as_default as as_default,
     as_json as as_json,
@@ -55,8 +76,16 @@ from ._reproductions import (
     reproduction_names as reproduction_names,
     reproduction_row as reproduction_row,
 )
+from ._study import (
+    Interrupted as Interrupted,
+    Result as Result,
+    Study as Study,
+    handling_signals as handling_signals,
+    interruptible as interruptible,
+)
 from ._sweep import (
     MemoryLimitError as MemoryLimitError,
+    SweepResult as SweepResult,
     available_memory as available_memory,
     best as best,
     grid as grid,

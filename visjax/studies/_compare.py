@@ -3,7 +3,8 @@ seeds, with accuracy, result code and timing per run, as tidy records."""
 
 import statistics
 import time
-from collections.abc import Callable, Mapping
+import warnings
+from collections.abc import Mapping
 from typing import Any
 
 import equinox as eqx
@@ -12,6 +13,7 @@ import numpy as np
 
 from .._results import RESULTS, result_names
 from ._problem import AbstractProblem, as_json, method_runs
+from ._study import Result, Study, seed_keys, study_of
 
 
 class StudyTooLong(ValueError):
@@ -19,117 +21,149 @@ class StudyTooLong(ValueError):
     given (`compare`'s `max_seconds`): refused after one seed, not found after hours."""
 
 
-def compare(
-    methods,
-    inputs: Callable[[jax.Array], tuple[Any, Any]] | None = None,
-    score: Callable[[str, Any, Any], dict] | None = None,
-    *,
-    seeds: int = 4,
-    first_seed: int = 0,
-    updates: Mapping[str, int] | None = None,
-    repeats: int = 3,
-    progress: bool = False,
-    params: Mapping[str, Any] | None = None,
-    max_seconds: float | None = None,
-) -> list[dict]:
-    """Run every method on the same inputs for each noise seed and record how it did.
+class Comparison(Result, list):
+    """What `compare` returns: the records (a list of dicts, one per method and key) and
+    `to_pandas()`, them as a table."""
 
-    `compare(problem, seeds=..., params=...)`: every method of an `AbstractProblem`
-    (its estimator and baselines, `params` overriding the defaults) on the problem's
-    noisy inputs, scored by its `metrics` (as JSON numbers; `None` for a failed run), with
-    the problem's `uncertainty` beside them (`None` where a method predicts none) and its
-    `updates`. Or, without a problem, the functional form below.
+    def to_pandas(self):
+        import pandas as pd
+
+        return pd.DataFrame(list(self))
+
+
+def compare(
+    problem,
+    keys: Any = None,
+    *old: Any,
+    params: Mapping[str, Any] | None = None,
+    study: Study | None = None,
+    **legacy: Any,
+) -> Comparison:
+    """Every method of `problem` (its estimator and baselines) on identical inputs for each
+    noise key, and how each did.
+
+    `compare(problem, keys, params=..., study=Study(...))`: the problem's noisy inputs of
+    each key (every method sees the same draw), each method's solution with `params`
+    overriding the defaults, scored by the problem's `metrics` (as JSON numbers; `None`
+    for a failed run), with the problem's `uncertainty` beside them (`None` where a
+    method predicts none) and its `updates` for the latency. A plain function joins as a
+    `FunctionProblem` (several methods: a dict of functions).
 
     **Arguments:**
 
-    - `methods`: an `AbstractProblem`, or name -> `method(inputs) -> solution`, a pure
-        function of the inputs (it is compiled once with `equinox.filter_jit`, on the first
-        seed). The solution must have a `result` (a visjax `RESULTS` item).
-    - `inputs`: `key -> (inputs, truth)`, the noisy measurements of one seed (every method
-        sees the same ones) and the ground truth for `score`.
-    - `score`: `(name, solution, truth) -> dict` of accuracy numbers (JSON-able).
-    - `seeds`: how many noise seeds: `first_seed, ..., first_seed + seeds - 1`
-        (`jax.random.key(seed)`).
-    - `first_seed`: the first of them (default 0).
-    - `updates`: per method, how many estimate updates one call makes, for the latency:
-        the number of samples for a recursive method (an observer, a filter: constant cost
-        per new sample), the number of window fits for a sliding-window fit, 1 for a batch
-        fit over all frames (whose latency is then a whole re-fit: what a new sample costs
-        if the batch answer is to stay current). Default: 1.
-    - `repeats`: timed calls per method and seed, after the compiling one; the median is
-        reported.
-    - `max_seconds`: a limit on the whole comparison's run time. After the first seed,
-        the rest is estimated from it (its inputs and calls, compilation excluded); past
-        the limit, `StudyTooLong` is raised, naming the estimate. Default: no limit.
+    - `problem`: an `AbstractProblem`.
+    - `keys`: the noise seeds: a 1-D array of ints (`jax.random.key(seed)` each) or of
+        typed PRNG keys (the records' `seed` is then the index).
+    - `params`: name -> value, overriding the defaults for every method.
+    - `study`: a `Study`: its `repeats` (timed calls per method and key, after the
+        compiling one; the median is reported), `progress` and `max_seconds` (a limit on
+        the whole comparison's run time: after the first key the rest is estimated from
+        it, compilation excluded; past the limit, `StudyTooLong` is raised, naming the
+        estimate).
 
-    **Returns:** one record per (method, seed): `method`, `seed`, `result` (the result
-    code's name), `latency_s_per_sample` (median call time / updates), `total_s` (median
-    call time), `compile_s` (the first call, compilation included: `first_seed` only, else
-    `None`) and the keys of `score`.
+    The version-3 forms (`compare(problem, seeds=, first_seed=, ...)`, the functional
+    `compare(methods, inputs, score, ...)`) still work, with a `FutureWarning`.
+
+    **Returns:** a `Comparison`: one record per (method, key): `method`, `seed`, `result`
+    (the result code's name), `latency_s_per_sample` (median call time / updates: the
+    samples for a recursive method, the window fits for a sliding-window fit, 1 for a
+    batch fit, whose latency is then a whole re-fit), `total_s` (median call time),
+    `compile_s` (the first call, compilation included: the first key only, else `None`)
+    and the metrics.
     """
+    if not isinstance(problem, AbstractProblem) or old or "seeds" in legacy:
+        return _version3(problem, keys, *old, params=params, study=study, **legacy)
+    study = study_of(study, "compare", **legacy)
+    typed, seed_values = seed_keys(keys, "compare")
+    resolved = problem.at(problem.resolve(params))  # its data parameters set
 
+    def problem_inputs(key):
+        return resolved.inputs(key), None
+
+    def problem_score(name, sol, truth):
+        ok = bool(sol.result == RESULTS.successful)
+        values = jax.tree_util.tree_map(np.asarray, resolved.metrics(name, sol))
+        ok = ok and all(np.all(np.isfinite(v)) for v in values.values())
+        spread = jax.tree_util.tree_map(np.asarray, resolved.uncertainty(name, sol))
+        return {**as_json(values, ok), **as_json(spread, ok, nullable=True)}
+
+    updates = {m: resolved.updates(m) for m in resolved.methods}
+    return _compare(
+        method_runs(resolved, params), problem_inputs, problem_score, typed, seed_values,
+        updates, study,
+    )  # fmt: skip
+
+
+def _version3(methods, inputs=None, score=None, *, params=None, study=None, **legacy):
+    """`compare`'s version-3 forms, with a `FutureWarning`: `compare(problem, seeds=,
+    first_seed=, repeats=, progress=, max_seconds=)` and `compare(methods, inputs, score,
+    seeds=, first_seed=, updates=, ...)`."""
+    allowed = {"seeds", "first_seed", "updates", "repeats", "progress", "max_seconds"}
+    unknown = sorted(set(legacy) - allowed)
+    if unknown:
+        raise TypeError(f"compare() got unexpected keyword argument(s) {unknown}.")
+    seeds, first_seed = legacy.pop("seeds", 4), legacy.pop("first_seed", 0)
+    updates = legacy.pop("updates", None)
+    if seeds < 1:
+        raise ValueError(f"`seeds` must be at least 1; got {seeds}.")
+    if not (isinstance(first_seed, int) and first_seed >= 0):
+        raise ValueError(f"`first_seed` must be a non-negative int; got {first_seed!r}.")
+    warnings.warn(
+        "`compare(..., seeds=, first_seed=)` and `compare(methods, inputs, score)` are "
+        "deprecated: pass `compare(problem, keys, study=Study(...))` (a plain function: "
+        "`FunctionProblem`).",
+        FutureWarning,
+        stacklevel=3,
+    )
+    keys = np.arange(first_seed, first_seed + seeds)
     if isinstance(methods, AbstractProblem):
-        problem = methods.at(methods.resolve(params))  # its data parameters set
         if inputs is not None or score is not None or updates is not None:
             raise ValueError("with a problem, `compare` takes no `inputs`, `score` or `updates`.")
-
-        def problem_inputs(key):
-            return problem.inputs(key), None
-
-        def problem_score(name, sol, truth):
-            ok = bool(sol.result == RESULTS.successful)
-            values = jax.tree_util.tree_map(np.asarray, problem.metrics(name, sol))
-            ok = ok and all(np.all(np.isfinite(v)) for v in values.values())
-            spread = jax.tree_util.tree_map(np.asarray, problem.uncertainty(name, sol))
-            return {**as_json(values, ok), **as_json(spread, ok, nullable=True)}
-
-        return compare(
-            method_runs(problem, params),
-            problem_inputs,
-            problem_score,
-            seeds=seeds,
-            first_seed=first_seed,
-            updates={m: problem.updates(m) for m in problem.methods},
-            repeats=repeats,
-            progress=progress,
-            max_seconds=max_seconds,
-        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            study = study_of(study, "compare", **legacy)
+        return compare(methods, keys, params=params, study=study)
     if inputs is None or score is None:
         raise ValueError("`compare(methods, inputs, score)`: `inputs` and `score` are needed.")
     if params is not None:
         raise ValueError("`params` is for `compare(problem, ...)`.")
-    if seeds < 1:
-        raise ValueError(f"`seeds` must be at least 1; got {seeds}.")
-    if repeats < 1:
-        raise ValueError(f"`repeats` must be at least 1; got {repeats}.")
-    if max_seconds is not None and not max_seconds > 0:
-        raise ValueError(f"`max_seconds` must be positive; got {max_seconds!r}.")
-    if not (isinstance(first_seed, int) and first_seed >= 0):
-        raise ValueError(f"`first_seed` must be a non-negative int; got {first_seed!r}.")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        study = study_of(study, "compare", **legacy)
     updates = dict(updates or {})
     unknown = set(updates) - set(methods)
     if unknown:
         raise ValueError(f"`updates` names methods not in `methods`: {sorted(unknown)}.")
+    typed, seed_values = seed_keys(keys, "compare")
+    return _compare(methods, inputs, score, typed, seed_values, updates, study)
+
+
+def _compare(methods, inputs, score, typed, seed_values, updates, study) -> Comparison:
+    """The comparison: `methods` (name -> `inputs -> solution`), compiled once each with
+    `equinox.filter_jit` on the first key; `inputs` (`key -> (inputs, truth)`); `score`
+    (`(name, solution, truth) -> dict`)."""
     compiled = {name: eqx.filter_jit(fn) for name, fn in methods.items()}
-    records = []
+    records = Comparison()
     from tqdm import tqdm
 
-    bar = tqdm(total=seeds * len(methods), desc="compare", unit="run", disable=not progress)
-    for seed in range(first_seed, first_seed + seeds):
+    n = len(seed_values)
+    bar = tqdm(total=n * len(methods), desc="compare", unit="run", disable=not study.progress)
+    for i in range(n):
+        seed = int(seed_values[i])
         started = time.perf_counter()
-        data, truth = inputs(jax.random.key(seed))
+        data, truth = inputs(typed[i])
         seed_s = time.perf_counter() - started  # the inputs, then every call but compiles
         for name, fn in compiled.items():
             t0 = time.perf_counter()
             sol = jax.block_until_ready(fn(data))
             first = time.perf_counter() - t0
             times = []
-            for _ in range(repeats):
+            for _ in range(study.repeats):
                 t0 = time.perf_counter()
                 jax.block_until_ready(fn(data))
                 times.append(time.perf_counter() - t0)
             total = statistics.median(times)
-            seed_s += sum(times) + (total if seed == first_seed else first)
+            seed_s += sum(times) + (total if i == 0 else first)
             records.append(
                 {
                     "method": name,
@@ -137,19 +171,23 @@ def compare(
                     "result": result_names(sol.result),
                     "latency_s_per_sample": total / updates.get(name, 1),
                     "total_s": total,
-                    "compile_s": first if seed == first_seed else None,
+                    "compile_s": first if i == 0 else None,
                     **score(name, sol, truth),
                 }
             )
             bar.update()
-        if seed == first_seed and max_seconds is not None and seeds > 1:
-            rest = seed_s * (seeds - 1)
-            if rest > max_seconds:
+        if i == 0 and study.max_seconds is not None and n > 1:
+            rest = seed_s * (n - 1)
+            if rest > study.max_seconds:
                 bar.close()
                 raise StudyTooLong(
-                    f"{seeds} seeds would take about {_duration(rest)} more ({seed_s:.3g} s a "
-                    f"seed, measured on the first), past the limit of {_duration(max_seconds)}"
+                    f"{n} seeds would take about {_duration(rest)} more ({seed_s:.3g} s a "
+                    f"seed, measured on the first), past the limit of "
+                    f"{_duration(study.max_seconds)}"
                 )
+        if study.stop is not None and study.stop():
+            bar.close()
+            raise KeyboardInterrupt("the comparison was asked to stop")
     bar.close()
     return records
 

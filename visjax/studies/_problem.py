@@ -18,7 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._results import RESULTS, all_finite
+from .._results import RESULTS, all_finite, result_names
+from ._study import Result
 
 
 class Parameter(eqx.Module):
@@ -346,24 +347,141 @@ def run_identity(run: _Run) -> str:
     return h.hexdigest()
 
 
-def runner(problem: AbstractProblem, method: str | None = None, fixed=None) -> _Run:
+class FunctionProblem(AbstractProblem):
+    """A plain function as a problem, so that every study (`evaluate`, `compare`, `sweep`,
+    `tune`) takes it through its one signature.
+
+    `FunctionProblem(solve, metrics, *, metric="", inputs=None, title=...)`:
+
+    - `solve`: `(params, key) -> solution`, a pure JAX function of one parameter point
+        (any pytree: what the study's points hold, one point at a time) and one PRNG key:
+        it builds the estimator from the parameters and the noisy measurements from the
+        key, and runs it (`throw=False`); the solution has a `result` (a visjax `RESULTS`
+        item). Or a dict name -> such functions: several methods (the first the
+        estimator), compared on identical inputs.
+    - `metrics`: `solution -> {name: array}` (pure JAX, computed inside the batch).
+    - `metric`: the headline metric, a key of `metrics` (what `tune` minimises and
+        `held_out` reports); default none.
+    - `inputs`: `key -> inputs`, the noisy measurements of one seed, shared by every
+        method; `solve` then takes `(params, inputs)`. Default: the key itself.
+
+    A function has no named parameters: a study's points are passed to it as they are
+    (no defaults, no positivity checks but `tune`'s), so `parameters()` is empty.
+    """
+
+    _solve: Any
+    _metrics: Any
+    _inputs: Any
+    _metric: str = eqx.field(static=True)
+    _title: str = eqx.field(static=True)
+
+    def __init__(self, solve, metrics, *, metric: str = "", inputs=None, title: str = ""):
+        funcs = solve if isinstance(solve, Mapping) else {"function": solve}
+        if not funcs or not all(callable(f) for f in funcs.values()):
+            raise ValueError(
+                "`solve` must be a function `(params, key) -> solution` or a non-empty dict "
+                f"name -> such functions; got {solve!r}."
+            )
+        if not callable(metrics):
+            raise ValueError(f"`metrics` must be a function solution -> dict; got {metrics!r}.")
+        if inputs is not None and not callable(inputs):
+            raise ValueError(f"`inputs` must be a function key -> inputs; got {inputs!r}.")
+        self._solve = dict(funcs)
+        self._metrics = metrics
+        self._inputs = inputs
+        self._metric = str(metric)
+        self._title = title or f"function {_name(next(iter(funcs.values())))}"
+
+    @property
+    def methods(self) -> tuple[str, ...]:  # the class variable of other problems
+        return tuple(self._solve)
+
+    @property
+    def metric(self) -> str:
+        return self._metric
+
+    @property
+    def title(self) -> str:
+        return self._title
+
+    def parameters(self) -> dict[str, Parameter]:
+        return {}
+
+    def resolve(self, params=None):
+        return {} if params is None else params
+
+    def gains(self, params) -> dict:
+        return jax.tree_util.tree_map(lambda v: np.asarray(v).tolist(), dict(params or {}))
+
+    def inputs(self, key):
+        return key if self._inputs is None else self._inputs(key)
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        return self._solve[method](params, inputs)
+
+    def metrics(self, method, solution):
+        return self._metrics(solution)
+
+
+def _name(f) -> str:
+    f = getattr(f, "__wrapped__", f)
+    return getattr(f, "__qualname__", type(f).__name__)
+
+
+class _FunctionRun(eqx.Module):
+    """A `FunctionProblem`'s run of one method: the study's point passed as it is (the
+    point of `evaluate`, `params`, when a study gives none)."""
+
+    problem: FunctionProblem
+    method: str = eqx.field(static=True)
+    params: Any
+
+    def __call__(self, point, key):
+        params = point if jax.tree_util.tree_leaves(point) else self.params
+        return self.problem.solve(self.method, params, self.problem.inputs(key))
+
+    def metrics(self, solution):
+        return self.problem.metrics(self.method, solution)
+
+
+def runner(problem: AbstractProblem, method: str | None = None, fixed=None, check=True) -> _Run:
     """The run of one method of a problem (`run(point, key) -> solution`,
     `run.metrics(solution)`): the parameters not in `point` from `fixed`, then the
-    defaults."""
+    defaults (a `FunctionProblem`: the point as it is, `fixed` when it is empty).
+    `check=False` (traceable `fixed`, as `evaluate` takes them): no value check."""
     method = problem.check_method(method)
+    if isinstance(problem, FunctionProblem):
+        return _FunctionRun(problem, method, fixed)
     fixed = dict(fixed or {})
-    check_values(problem, fixed, "fixed parameters")
+    if check:
+        check_values(problem, fixed, "fixed parameters")
     return _Run(problem, method, problem.resolve(fixed))
 
 
-class Evaluation(eqx.Module):
+class Evaluation(Result, eqx.Module):
     """What `evaluate` returns, one entry per key: `metrics` (name -> array with a leading
     key axis; NaN where the run failed), `result` (a `RESULTS` item per key) and
-    `failed_sample` (per key, -1 if none)."""
+    `failed_sample` (per key, -1 if none). A pytree (it comes out of `jit` and `grad`);
+    `to_pandas()`: one row per key (`key`, `result`, `failed_sample`, the metrics, an
+    array metric one column per component)."""
 
     metrics: dict
     result: RESULTS
     failed_sample: jax.Array
+
+    def to_pandas(self):
+        import pandas as pd
+
+        failed = np.asarray(self.failed_sample)
+        rows = {"key": np.arange(failed.shape[0]), "result": result_names(self.result)}
+        rows["failed_sample"] = failed
+        for name, values in self.metrics.items():
+            v = np.asarray(values).reshape(failed.shape[0], -1)
+            if v.shape[1] == 1:
+                rows[name] = v[:, 0]
+            else:
+                rows.update({f"{name}[{i}]": v[:, i] for i in range(v.shape[1])})
+        return pd.DataFrame(rows)
 
 
 def evaluate(
@@ -394,8 +512,7 @@ def evaluate(
                 f"(jax.random.key); got dtype {keys.dtype} and shape {keys.shape}."
             )
         keys = jax.vmap(jax.random.key)(keys)
-    params = problem.resolve(params)
-    values, result, failed = _evaluate_keys(_Run(problem, method, params), keys)
+    values, result, failed = _evaluate_keys(runner(problem, method, params, check=False), keys)
     return Evaluation(values, result, failed)
 
 
@@ -440,12 +557,13 @@ def solution(
         if isinstance(key, bool) or not isinstance(key, int | np.integer) or key < 0:
             raise ValueError(f"`key` must be a non-negative int seed or a PRNG key; got {key!r}.")
         key = jax.random.key(int(key))
-    params = problem.resolve(params)
-    return _solve_outputs(_Run(problem, method, params), key)
+    return _solve_outputs(runner(problem, method, params, check=False), key)
 
 
 @eqx.filter_jit  # the problem's arrays and the parameters traced: a new file reuses it
 def _solve_outputs(run, key):
+    if isinstance(run, _FunctionRun):
+        return run({}, key)
     problem = run.problem.at(run.params)
     return problem.solve(run.method, run.params, problem.inputs(key), outputs=True)
 

@@ -10,6 +10,7 @@ and `random_points` (log-uniform samples).
 import math
 import os
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -22,7 +23,8 @@ from jax.sharding import NamedSharding, PartitionSpec
 from .._results import RESULTS, all_finite
 from .._xla_workaround import warn_if_hang_prone
 from ._parts import Parts
-from ._problem import AbstractProblem, check_values, run_identity, runner
+from ._problem import AbstractProblem, FunctionProblem, check_values, run_identity, runner
+from ._study import Result, Study, study_of
 
 
 def log_axis(low: float | int, high: float | int, num: int) -> np.ndarray:
@@ -140,33 +142,33 @@ def _key_data(keys) -> np.ndarray:
     return np.asarray(jax.random.key_data(jax.vmap(jax.random.key)(keys)))
 
 
+_STUDY_OPTIONS = (
+    "chunk", "mesh", "progress", "runs", "parts", "resume", "shard", "executor", "max_memory",
+    "log", "stop",
+)  # fmt: skip
+
+
 def sweep(
-    factory,
-    params: Any,
+    problem,
+    points: Any,
     keys: Any,
     *,
-    metrics: Callable[[Any], Mapping[str, jax.Array]] | None = None,
     method: str | None = None,
     fixed: Mapping[str, Any] | None = None,
-    chunk: int = 64,
-    mesh: jax.sharding.Mesh | None = None,
-    progress: bool = False,
-    runs: Sequence[int] | None = None,
-    parts: Any = None,
-    resume: bool = False,
-    shard: tuple[int, int] | None = None,
-    executor: Any = None,
-    max_memory: int | float | str | None = None,
-    log: Callable[[str], None] | None = None,
-    stop: Callable[[], bool] | None = None,
-):
-    """Run `factory` at every parameter point for every noise seed, batched, as a table.
+    study: Study | None = None,
+    metrics: Callable[[Any], Mapping[str, jax.Array]] | None = None,
+    **old: Any,
+) -> "SweepResult":
+    """One method of `problem` at every parameter point for every noise key, batched, as a
+    table.
 
-    `sweep(problem, params, keys, method=..., fixed=...)`: one method (default: the
-    estimator) of an `AbstractProblem`; `params` names some of its parameters (the
-    points), `fixed` others (one value for every run), the rest keep their defaults. Every
-    value is checked (finite; positive where the parameter must be) before any run. A
-    compiled chunk is reused by a rebuilt problem with equal fields.
+    `sweep(problem, points, keys, method=..., fixed=..., study=Study(...))`: one method
+    (default: the estimator) of an `AbstractProblem`; `points` names some of its
+    parameters (a dict name -> values with a common leading axis), `fixed` others (one
+    value for every run), the rest keep their defaults. Every value is checked (finite;
+    positive where the parameter must be) before any run. A compiled chunk is reused by a
+    rebuilt problem with equal shapes and settings (its arrays are traced). A plain
+    function joins as a `FunctionProblem` (its points any pytree).
 
     **Runs and their noise.** Run `i` is parameter point `i // S` with noise seed
     `i % S` (S seeds; the seed fastest), and its noise is drawn from that seed's key alone
@@ -177,18 +179,14 @@ def sweep(
 
     **Arguments:**
 
-    - `factory`: an `AbstractProblem`, or `(params, key) -> solution`, a pure JAX function
-        of one parameter point (the pytree `params` with the leading axis removed) and one
-        PRNG key: it builds the estimator (or baseline) from the parameters, the noisy
-        measurements from the key, and runs it (`throw=False`). The solution must have a
-        `result` (a visjax `RESULTS` item); its `failed_sample`, if it has one, goes into
-        the table.
-    - `params`: a pytree of arrays with a common leading axis P (the points; `grid`,
-        `parse_grid` or `random_points` build one).
+    - `problem`: an `AbstractProblem`; its `metrics` are computed inside the batch
+        (floating scalars or small arrays; an array becomes one column per component,
+        `name[i]`); a solution's `failed_sample`, if it has one, goes into the table.
+    - `points`: name -> values with a common leading axis P (the points; `grid`,
+        `parse_grid` or `random_points` build one; a `FunctionProblem`'s: any pytree).
     - `keys`: S noise seeds: a 1-D array of ints (`jax.random.key(seed)` each) or of typed
         PRNG keys (the table's `seed` column is then the index).
-    - `metrics`: `solution -> {name: array}`, computed inside the batch (floating scalars
-        or small arrays; an array becomes one column per component, `name[i]`).
+    - `study`: a `Study`, how the sweep runs; its fields:
     - `chunk`: runs per compiled `vmap` call (rounded up to a multiple of the mesh's device
         count): memory is bounded by one chunk whatever P x S is. Chunk `c` holds runs
         `c * chunk` to `(c + 1) * chunk - 1`; the last is padded with repeats of the last
@@ -227,7 +225,11 @@ def sweep(
         `KeyboardInterrupt`, every finished chunk written (a time limit, a signal handler
         that asks for a clean stop).
 
-    **Returns:** a `pandas.DataFrame`, one row per run (point-major, the seed fastest):
+    The version-3 forms (`sweep(factory, params, keys, metrics=...)`, the options as
+    keyword arguments) still work, with a `FutureWarning`.
+
+    **Returns:** a `SweepResult`; its `to_pandas()` (the table) has one row per run
+    (point-major, the seed fastest):
     `run`, `point` (the parameter point's index), the parameters (leaf names joined by `.`,
     components as `name[i]`), `seed`, `result` (the result code's name), `failed_sample`
     (-1 if none) and the metrics. A failed run keeps its row and its code; its metrics are
@@ -235,20 +237,40 @@ def sweep(
     not finite is marked `nonfinite_output`. With `shard`, the rows of the shard's runs.
     """
 
-    identity_source, info = None, {}
-    if isinstance(factory, AbstractProblem):
-        info = {"metric": factory.metric, "method": factory.check_method(method)}
-        if metrics is not None:
-            raise ValueError("with a problem, `sweep` takes its metrics from the problem.")
-        if not isinstance(params, Mapping):
-            raise ValueError("`params` of a problem's sweep must be a dict name -> values.")
-        check_values(factory, params, "sweep")
-        factory = runner(factory, method, fixed)
+    unknown = sorted(set(old) - set(_STUDY_OPTIONS))
+    if unknown:
+        raise TypeError(f"sweep() got unexpected keyword argument(s) {unknown}.")
+    study = study_of(study, "sweep", **old)
+    if not isinstance(problem, AbstractProblem):  # version 3: sweep(fn, ...)
+        if metrics is None:
+            raise ValueError(
+                "`sweep(problem, points, keys)`: `problem` must be an AbstractProblem."
+            )
+        warnings.warn(
+            "`sweep(factory, params, keys, metrics=...)` is deprecated: pass "
+            "`sweep(FunctionProblem(factory, metrics), points, keys)`.",
+            FutureWarning,
+            stacklevel=2,
+        )
+        problem = FunctionProblem(problem, metrics)
+    elif metrics is not None:
+        raise ValueError("with a problem, `sweep` takes its metrics from the problem.")
+    info = {"metric": problem.metric, "method": problem.check_method(method)}
+    if isinstance(problem, FunctionProblem):
+        if fixed is not None:
+            raise ValueError("`fixed` is for a problem with named parameters.")
+        factory = runner(problem, method)
+        identity_source = _qualname(problem._solve[info["method"]])
+    else:
+        if not isinstance(points, Mapping):
+            raise ValueError("`points` of a problem's sweep must be a dict name -> values.")
+        check_values(problem, points, "sweep")
+        factory = runner(problem, method, fixed)
         identity_source = run_identity(factory)
-    elif metrics is None:
-        raise ValueError("`sweep(factory, params, keys, metrics=...)`: `metrics` is needed.")
-    elif method is not None or fixed is not None:
-        raise ValueError("`method` and `fixed` are for `sweep(problem, ...)`.")
+    metrics = None
+    params = points
+    chunk, mesh, shard, runs = study.chunk, study.mesh, study.shard, study.runs
+    parts, resume, executor, log = study.parts, study.resume, study.executor, study.log
     leaves_with_path, treedef = jax.tree_util.tree_flatten_with_path(params)
     if not leaves_with_path:
         raise ValueError("`params` has no array leaves.")
@@ -264,10 +286,6 @@ def sweep(
     n_seeds = key_data.shape[0]
     if n_points < 1 or n_seeds < 1:
         raise ValueError(f"nothing to run: {n_points} parameter points and {n_seeds} seeds.")
-    if isinstance(chunk, bool) or not isinstance(chunk, int | np.integer) or chunk < 1:
-        raise ValueError(f"`chunk` must be a positive int; got {chunk!r}.")
-    if executor is not None and mesh is not None:
-        raise ValueError("`executor` runs whole chunks on its workers: not with `mesh`.")
     devices = 1 if mesh is None else mesh.devices.size
     n_runs = n_points * n_seeds
     # a small sweep runs in one chunk of the next power of two (so that sweeps of similar
@@ -276,18 +294,13 @@ def sweep(
     chunk = devices * math.ceil(min(int(chunk), small) / devices)
 
     if runs is not None:
-        if parts is not None or shard is not None:
-            raise ValueError("`runs` (a subset of runs) is not for `parts` or `shard`.")
         wanted = np.unique(np.asarray(runs, dtype=np.int64).ravel())
         if wanted.size == 0 or wanted[0] < 0 or wanted[-1] >= n_runs:
             raise ValueError(f"`runs` must be run indices in [0, {n_runs}); got {runs!r}.")
         plan = [(c, wanted[c * chunk : (c + 1) * chunk]) for c in range(-(-wanted.size // chunk))]
     else:
         if shard is not None:
-            i, n = (int(x) for x in shard)
-            if not (n >= 1 and 0 <= i < n):
-                raise ValueError(f"`shard` must be (i, n) with 0 <= i < n; got {shard!r}.")
-            shard = (i, n)
+            shard = tuple(int(x) for x in shard)
         n_chunks = math.ceil(n_runs / chunk)
         ids = range(n_chunks) if shard is None else range(shard[0], n_chunks, shard[1])
         plan = [(c, np.arange(c * chunk, min((c + 1) * chunk, n_runs))) for c in ids]
@@ -299,16 +312,14 @@ def sweep(
         info.update(n_points=int(n_points), n_seeds=int(n_seeds))
         store = Parts(parts, identity, n_runs, chunk, shard=shard, info=info)
         done = store.open(resume=resume, log=log)
-    elif resume:
-        raise ValueError("`resume=True` needs the `parts` folder of the sweep to resume.")
 
     if chunk > 1:
         warn_if_hang_prone()
     compiled = _compiled(factory, metrics, treedef, mesh)
     seed_values = np.asarray(keys) if not _is_key_array(keys) else np.arange(n_seeds)
     todo = [(c, idx) for c, idx in plan if c not in done]
-    if todo and executor is None and max_memory is not None:
-        _check_memory(compiled, leaves, key_data, chunk, max_memory, log)
+    if todo and executor is None and study.max_memory is not None:
+        _check_memory(compiled, leaves, key_data, chunk, study.max_memory, log)
 
     def frame(idx, out):
         values, codes, failed = jax.tree_util.tree_map(lambda x: np.asarray(x)[: idx.size], out)
@@ -317,7 +328,7 @@ def sweep(
     frames = {c: store.read(c) for c, _ in plan if c in done}
     from tqdm import tqdm
 
-    show = progress and jax.process_index() == 0
+    show = study.progress and jax.process_index() == 0
     bar = tqdm(total=len(plan), initial=len(frames), desc="sweep", unit="chunk", disable=not show)
     timer = _Timer(len(todo), chunk, log)
     if executor is None:
@@ -343,14 +354,48 @@ def sweep(
                 store.write(c, frames[c])
             bar.update(1)
             timer.tick()
-            if stop is not None and stop():
+            if study.stop is not None and study.stop():
                 raise KeyboardInterrupt("the sweep was asked to stop")
     finally:
         bar.close()
     import pandas as pd
 
     table = pd.concat([frames[c] for c, _ in plan], ignore_index=True)
-    return table.sort_values("run", kind="stable").reset_index(drop=True)
+    table = table.sort_values("run", kind="stable").reset_index(drop=True)
+    return SweepResult(table, problem.metric, int(n_points), int(n_seeds))
+
+
+class SweepResult(Result):
+    """What `sweep` returns: `to_pandas()` (its table, one row per run), `metric` (the
+    problem's headline metric), `n_points`, `n_seeds`. It reads like its table
+    (`result["rmse"]`, `len(result)`, `result.columns`, ...); `summarise`, `best` and
+    `save_table` take either."""
+
+    def __init__(self, table, metric: str, n_points: int, n_seeds: int):
+        self._table, self.metric = table, metric
+        self.n_points, self.n_seeds = n_points, n_seeds
+
+    def to_pandas(self):
+        return self._table
+
+    def __getitem__(self, item):
+        return self._table[item]
+
+    def __len__(self) -> int:
+        return len(self._table)
+
+    def __getattr__(self, name):
+        if name.startswith("__") or name == "_table":
+            raise AttributeError(name)
+        return getattr(self._table, name)
+
+    def __repr__(self) -> str:
+        return f"SweepResult({self.n_points} points x {self.n_seeds} seeds)\n{self._table!r}"
+
+
+def _as_frame(table):
+    """A sweep's table as a `pandas.DataFrame` (a `SweepResult`'s, or the frame itself)."""
+    return table.to_pandas() if isinstance(table, Result) else table
 
 
 def _qualname(factory) -> str:
@@ -594,6 +639,7 @@ def summarise(table, metric: str, params: Sequence[str] | None = None):
     keeps its row (its statistics over the others) and is never `best`.
 
     **Returns:** a `pandas.DataFrame`, one row per point, sorted by `point`."""
+    table = _as_frame(table)
     if metric not in table.columns:
         raise ValueError(f"no metric column {metric!r}; the table has {list(table.columns)}.")
     if params is None:
@@ -620,6 +666,7 @@ def best(table, metric: str) -> dict:
 
     **Returns:** `{"point": int, "params": {column: value}, "metric": mean, "std": float}`.
     **Raises:** `ValueError` if every point has a failed run."""
+    table = _as_frame(table)
     s = summarise(table, metric)
     usable = s[(s["n_failed"] == 0) & np.isfinite(s[f"{metric}_mean"])]
     if usable.empty:
@@ -643,6 +690,7 @@ def save_table(table, out_dir) -> dict:
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    table = _as_frame(table)
     table.to_parquet(out / "runs.parquet", index=False)
     table.to_csv(out / "runs.csv", index=False)
     return {"parquet": out / "runs.parquet", "csv": out / "runs.csv"}
@@ -653,8 +701,7 @@ def held_out(
     points: Mapping[str, Mapping[str, Any]],
     keys,
     *,
-    chunk: int = 64,
-    mesh=None,
+    study: Study | None = None,
 ) -> dict[str, dict]:
     """Named parameter points of `problem` measured on noise keys no study has seen: the
     honest figure once a sweep or a tuning chose a point on keys of its own (what `visjax
@@ -662,7 +709,8 @@ def held_out(
 
     **Arguments:** `problem`; `points` (name -> {parameter: value}; a vector parameter may
     be named by one value, broadcast to its shape); `keys` (as `sweep`'s: 1-D int seeds or
-    typed PRNG keys, the same for every point); `chunk`, `mesh` as `sweep`'s.
+    typed PRNG keys, the same for every point); `study` (a `Study`: its `chunk` and
+    `mesh`, as `sweep`'s).
 
     **Returns:** name -> `{"params", "metric", "failed"}`: the point as given (Python
     numbers), the mean of the problem's headline metric over the keys whose run succeeded
@@ -687,7 +735,8 @@ def held_out(
     if any(set(f) != set(full[0]) for f in full):
         raise ValueError("every point must name the same parameters (the others: defaults).")
     params = {k: np.stack([f[k] for f in full]) for k in full[0]}
-    table = sweep(problem, params, keys, chunk=chunk, mesh=mesh)
+    study = Study() if study is None else study
+    table = sweep(problem, params, keys, study=Study(chunk=study.chunk, mesh=study.mesh))
     out = {}
     for i, n in enumerate(names):
         rows = table[table["point"] == i]

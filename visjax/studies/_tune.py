@@ -11,13 +11,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS
-from ._problem import AbstractProblem, check_values, runner
+from ._problem import AbstractProblem, FunctionProblem, check_values, runner
+from ._study import Result, Study, study_of
 from ._sweep import _key_data
 
 
 @dataclass(frozen=True)
-class TuneResult:
-    """What `tune` returns.
+class TuneResult(Result):
+    """What `tune` returns; `to_pandas()`: its `history`, one row per step.
 
     **Fields:** `params` (the best point met, name -> float or array), `loss` (its loss),
     `params0`, `loss0` (the start), `history` (one dict per step: `step`, `loss`, and the
@@ -31,23 +32,47 @@ class TuneResult:
     history: list = field(default_factory=list)
     converged: bool = True
 
+    def to_pandas(self):
+        import pandas as pd
+
+        return pd.DataFrame(self.history)
+
+
+def _function_problem(factory, loss, where):
+    """The version-3 functional form `(factory, loss)` as a `FunctionProblem`, with a
+    `FutureWarning`."""
+    import warnings
+
+    warnings.warn(
+        f"`{where}(factory, params0, loss, keys)` is deprecated: pass "
+        f"`{where}(FunctionProblem(factory, lambda s: {{'loss': loss(s)}}, metric='loss'), "
+        "..., keys)`.",
+        FutureWarning,
+        stacklevel=3,
+    )
+    return FunctionProblem(factory, _LossMetric(loss), metric="loss")
+
+
+class _LossMetric(eqx.Module):
+    loss: Any
+
+    def __call__(self, solution):
+        return {"loss": self.loss(solution)}
+
 
 def objective(
-    factory,
-    loss: Any,
-    keys: Any = None,
-    *,
-    mode: str = "forward",
+    problem,
+    keys: Any,
+    *old: Any,
     method: str | None = None,
     fixed: Mapping[str, Any] | None = None,
+    mode: str = "forward",
 ) -> Callable[[dict], jax.Array]:
-    """The tuning objective as a function of the log parameters: `log_params -> mean over
-    the seeds of loss(factory(exp(log_params), key))` (vmapped over the seeds).
-
-    `objective(problem, keys, method=..., fixed=...)`: the same for one method of an
-    `AbstractProblem` (default the estimator), its loss the headline metric
-    (`problem.metric`), the parameters not given (in `fixed`, or in the log parameters)
-    at their defaults.
+    """The tuning objective of one method of `problem` (default the estimator) as a
+    function of the log parameters: `log_params -> mean over keys of the headline metric
+    (`problem.metric`) of the run at exp(log_params)` (vmapped over the keys), the
+    parameters not given (in `fixed`, or in the log parameters) at their defaults. A plain
+    function joins as a `FunctionProblem`.
 
     A failed run (any result code but `successful`) makes the objective `inf`, so that no
     optimiser mistakes a frozen state's numbers for a good loss.
@@ -61,12 +86,13 @@ def objective(
     if mode not in ("forward", "reverse"):
         raise ValueError(f"`mode` must be 'forward' or 'reverse'; got {mode!r}.")
 
-    if isinstance(factory, AbstractProblem):
-        if keys is not None:
-            raise ValueError("`objective(problem, keys)` takes two positional arguments.")
-        factory, loss, keys = (*_problem_loss(factory, method, fixed), loss)
-    elif keys is None:
-        raise ValueError("`objective(factory, loss, keys)`: `keys` is needed.")
+    if not isinstance(problem, AbstractProblem):  # version 3: objective(factory, loss, keys)
+        if len(old) != 1:
+            raise ValueError("`objective(problem, keys)`: `problem` must be an AbstractProblem.")
+        problem, keys = _function_problem(problem, keys, "objective"), old[0]
+    elif old:
+        raise ValueError("`objective(problem, keys)` takes two positional arguments.")
+    factory, loss = _problem_loss(problem, method, fixed)
 
     kd = jnp.asarray(_key_data(keys))
 
@@ -100,24 +126,25 @@ def objective(
 
 
 def tune(
-    factory,
+    problem,
     params0: Mapping[str, Any],
-    loss: Any,
-    keys: Any = None,
-    *,
+    keys: Any,
+    *old: Any,
     method: str | None = None,
     fixed: Mapping[str, Any] | None = None,
     optimiser: Any = None,
     steps: int = 40,
     mode: str = "forward",
-    progress: bool = False,
+    study: Study | None = None,
+    progress: bool | None = None,
 ) -> TuneResult:
     """Tune positive parameters (gains) by gradient descent through the runner.
 
-    `tune(problem, params0, keys, method=..., fixed=...)`: the parameters named in
-    `params0` of one method (default: the estimator) of an `AbstractProblem`, minimising
-    the mean of its headline metric (`problem.metric`) over `keys`; `fixed` sets other
-    parameters, the rest keep their defaults. Only positive parameters can be tuned.
+    `tune(problem, params0, keys, method=..., fixed=..., study=...)`: the parameters named
+    in `params0` of one method (default: the estimator) of an `AbstractProblem`,
+    minimising the mean of its headline metric (`problem.metric`) over `keys`; `fixed`
+    sets other parameters, the rest keep their defaults. Only positive parameters can be
+    tuned. A plain function joins as a `FunctionProblem` (its `metric` the loss).
 
     The parameters are optimised as their logarithms ($p = e^{z}$): they stay positive and
     a step is relative (a gain spread over decades is as easy to move at 0.01 as at 100).
@@ -131,28 +158,36 @@ def tune(
 
     **Arguments:**
 
-    - `factory`: `(params, key) -> solution` as for `sweep` (a dict of positive parameters).
+    - `problem`: an `AbstractProblem` (a `FunctionProblem`: `params0` a dict of positive
+        parameters).
     - `params0`: name -> positive float or array, the start.
-    - `loss`: `solution -> scalar`, averaged over `keys`.
     - `keys`: the training noise seeds (ints or typed keys). Report the tuned gains on
-        other, held-out seeds.
+        other, held-out seeds (`held_out`).
     - `optimiser`: an `optax.GradientTransformation` (default `optax.adam(0.1)`: steps of
         about 10% in each gain), run for `steps` steps keeping the best point met; or an
         `optimistix.AbstractMinimiser` (e.g. `optimistix.BFGS(rtol=1e-4, atol=1e-6)`),
         run by `optimistix.minimise` with `max_steps=steps`.
     - `mode`: `"forward"` or `"reverse"` differentiation (see `objective`).
-    - `progress`: a progress bar over the optax steps.
+    - `study`: a `Study`; its `progress` shows a progress bar over the optax steps.
 
     **Returns:** a `TuneResult`.
     """
     import optax
     import optimistix as optx
 
-    if isinstance(factory, AbstractProblem):
-        problem = factory
-        if keys is not None:
-            raise ValueError("`tune(problem, params0, keys)` takes three positional arguments.")
-        keys = loss
+    study = study_of(study, "tune", progress=progress)
+    if not isinstance(problem, AbstractProblem):  # version 3: tune(fn, ...)
+        if len(old) != 1:
+            raise ValueError(
+                "`tune(problem, params0, keys)`: `problem` must be an AbstractProblem."
+            )
+        problem, keys = _function_problem(problem, keys, "tune"), old[0]
+    elif old:
+        raise ValueError("`tune(problem, params0, keys)` takes three positional arguments.")
+    if method is not None or fixed is not None:
+        if isinstance(problem, FunctionProblem):
+            raise ValueError("`method` and `fixed` are for a problem with named parameters.")
+    if not isinstance(problem, FunctionProblem):
         check_values(problem, params0, "tune")
         specs = problem.parameters()
         not_positive = [k for k in params0 if not specs[k].positive]
@@ -161,11 +196,6 @@ def tune(
                 f"tune: parameters {not_positive} may be negative; tune works "
                 "on the logarithms of positive parameters."
             )
-        factory, loss = _problem_loss(problem, method, fixed)
-    elif keys is None:
-        raise ValueError("`tune(factory, params0, loss, keys)`: `keys` is needed.")
-    elif method is not None or fixed is not None:
-        raise ValueError("`method` and `fixed` are for `tune(problem, ...)`.")
     names = list(params0)
     p0 = {k: np.asarray(v, float) for k, v in params0.items()}
     for k, v in p0.items():
@@ -174,7 +204,7 @@ def tune(
     if steps < 1:
         raise ValueError(f"`steps` must be at least 1; got {steps}.")
     z0 = {k: jnp.log(jnp.asarray(v)) for k, v in p0.items()}
-    fn = objective(factory, loss, keys, mode=mode)
+    fn = objective(problem, keys, method=method, fixed=fixed, mode=mode)
 
     def as_params(z):
         return {k: _to_py(np.exp(np.asarray(z[k]))) for k in names}
@@ -219,7 +249,7 @@ def tune(
     # update is not taken)
     history, z = [], z0
     best_z, best_loss, loss0 = z0, np.inf, np.nan
-    for i in tqdm(range(steps + 1), desc="tune", unit="step", disable=not progress):
+    for i in tqdm(range(steps + 1), desc="tune", unit="step", disable=not study.progress):
         value, z_next, state_next = step(z, state)
         value = float(value)
         if i == 0:
@@ -236,6 +266,8 @@ def tune(
 def _problem_loss(problem, method, fixed):
     """`(factory, loss)` of one method of a problem: its headline metric as the loss."""
 
+    if not problem.metric:
+        raise ValueError(f"{problem.title}: tuning needs its headline metric (`metric=`).")
     factory = runner(problem, method, fixed)
 
     def loss(sol):
