@@ -435,7 +435,7 @@ def _magnitudes(rng, kind, n, shape):
 
 def fuzz_algebra(n, seed, dtype):
     """The functions with no error path (their docstrings say NaN in, NaN out): `skew`,
-    `vee`, `sinc`, `to_homogeneous`, `intrinsic_matrix`, `camera_matrix`, `intrinsics_eq4`,
+    `vee`, `sinc`, `to_homogeneous`, `intrinsic_matrix`, `camera_matrix`, `intrinsics_from_camera`,
     `extended_intrinsics`, `normalized_to_pixel`, `alpha_g33`, `euclidean_homography`,
     `projective_homography`, `camera_parameters`, `feature_in_camera` and the two
     regressors of Nath et al. (eqs. (9), (10), (12)), each against the same formula in
@@ -507,7 +507,7 @@ def fuzz_algebra(n, seed, dtype):
             ref = np.where(xf == 0.0, 1.0, np.sin(xf) / np.where(xf == 0.0, 1.0, xf))
         record("sinc", kind, _vm(g.sinc)(x[:, 0]), ref, np.ones(n), 8 * eps)
 
-        # intrinsic_matrix, intrinsics_eq4, normalized_to_pixel
+        # intrinsic_matrix, intrinsics_from_camera, normalized_to_pixel
         fx, fy = (10.0 ** rng.uniform(1, 4, n) for _ in range(2))
         cx, cy, sk = rng.uniform(0, 1000, n), rng.uniform(0, 1000, n), rng.normal(0, 5, n)
 
@@ -542,8 +542,8 @@ def fuzz_algebra(n, seed, dtype):
         )
         ref[:, 1] = np.stack([np.zeros(n), b[:, 0] * b[:, 2] / np.sin(b[:, 3]), b[:, 5]], 1)
         ref[:, 2, 2] = 1.0
-        got = _vm(lambda z: g.intrinsics_eq4(z[0], z[1], z[2], z[3], z[4], z[5]))(e4)
-        record("intrinsics_eq4", kind, got, ref, norm(ref), 16 * tol)
+        got = _vm(lambda z: g.intrinsics_from_camera(z[0], z[1], z[2], z[3], z[4], z[5]))(e4)
+        record("intrinsics_from_camera", kind, got, ref, norm(ref), 16 * tol)
         m = _magnitudes(rng, kind, n, (2,))
         A = intrinsics()
         m, A = cast(*_poison(rng, kind, m, A))

@@ -17,7 +17,7 @@ import numpy as np
 from visjax import sim
 from visjax.design import design_uio, design_uio_for_motion
 from visjax.estimators import (
-    THESIS_A_U,
+    MOVING_POINT_A_U,
     MovingPointEstimator,
     SaveAt,
     moving_point_stream,
@@ -80,7 +80,7 @@ def design(name: str, option: str, **grid):
     if option == "fixed_A_peak":
         # the thesis' form: A frozen at the peak velocity, (3.6) with a small Lipschitz bound
         u = velocity_range(name, 1.0)[1]
-        A = np.einsum("j,jab->ab", u, THESIS_A_U)
+        A = np.einsum("j,jab->ab", u, MOVING_POINT_A_U)
         d = design_uio(A, C, D1, 1e-3, uub=uub)
         return {"A": A, "K": d.K, "Y": d.Y}, d
     if option.startswith("persistent"):

@@ -535,3 +535,25 @@ def test_a_signal_inside_a_gc_callback_is_sent_again_not_dropped():
         gc.callbacks.remove(callback)
     assert seen and all(seen)
     assert not _in_gc_callback(sys._getframe())
+
+
+def test_a_study_command_builds_its_problem_once(capsys):
+    """The command line checks a study on the built problem and runs the command on the
+    same one (`verbs.check_study` returns it, the command takes it as `built`): no second
+    build, no cache keyed on a file's modification time."""
+    from tests.studies.slow_toy import slow_toy
+
+    builds = []
+
+    def counted(*, noise_px: float = 0.1):
+        builds.append(noise_px)
+        return slow_toy(noise_px=noise_px)
+
+    studies.register_problem("counted-toy", counted, replace=True)
+    for argv in (
+        ["sweep", "counted-toy", "--grid", "gain=1/2", "--seeds", "1", "--quiet"],
+        ["compare", "counted-toy", "--seeds", "1", "--quiet"],
+    ):
+        builds.clear()
+        assert main(argv) == 0, capsys.readouterr().err
+        assert builds == [0.1], argv

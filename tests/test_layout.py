@@ -160,6 +160,46 @@ def test_no_import_of_another_packages_private_module():
     assert not bad, bad
 
 
+PAPERS = {"papers", "chitrakaran", "jang", "nath", "spica", "hamel"}
+
+
+def _paper_constants_used(path: pathlib.Path, source: str | None = None) -> list[str]:
+    """The constants (UPPER_CASE names) of `visjax.papers` that a module (its `source`,
+    default the file's) imports (`from .papers.chitrakaran import K_EQ63`) or reads as an
+    attribute (`papers.jang.SETS`)."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text() if source is None else source)):
+        if isinstance(node, ast.ImportFrom) and PAPERS & set(_absolute(path, node)):
+            found += [a.name for a in node.names if a.name.isupper()]
+        elif isinstance(node, ast.Attribute) and node.attr.isupper():
+            chain, value = [], node.value
+            while isinstance(value, ast.Attribute):
+                chain.append(value.attr)
+                value = value.value
+            if isinstance(value, ast.Name):
+                chain.append(value.id)
+            if PAPERS & set(chain):
+                found.append(".".join([*reversed(chain), node.attr]))
+    return found
+
+
+def test_paper_constants_are_used_only_in_papers():
+    """Issue 45: a paper's numbers (published gains, its scene's constants) are read in
+    `visjax/papers` only; the command line takes its defaults from the registered
+    problem's `parameters()`."""
+    bad = {
+        str(path.relative_to(PACKAGE)): found
+        for path in PACKAGE.rglob("*.py")
+        if "papers" not in path.relative_to(PACKAGE).parts
+        and (found := _paper_constants_used(path))
+    }
+    assert not bad, bad
+    # the check sees what it looks for
+    source = "from .papers.chitrakaran import K_EQ63\nx = papers.jang.SETS\n"
+    found = _paper_constants_used(PACKAGE / "probe.py", source)
+    assert found == ["K_EQ63", "papers.jang.SETS"]
+
+
 def test_importing_visjax_loads_neither_opencv_nor_cvxpy():
     code = (
         "import sys, visjax; "

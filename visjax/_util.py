@@ -175,12 +175,16 @@ class Note(str):
         return 0
 
 
-def renamed(module: str, names: dict[str, str], namespace: dict):
+def renamed(module: str, names: dict[str, str], namespace: dict, moved=None):
     """A module's `__getattr__` that still gives each old name of `names` (old -> new) its
-    new object, with a `FutureWarning` naming the new one (the old vocabulary, read on)."""
+    new object, with a `FutureWarning` naming the new one (the old vocabulary, read on);
+    a name of `moved` (old -> its new home in another package, which this one may not
+    import) raises an `AttributeError` saying where it went."""
     import warnings
 
     def __getattr__(name: str):
+        if moved and name in moved:
+            raise AttributeError(f"{module}.{name} moved: it is now {moved[name]}")
         if name in names:
             warnings.warn(
                 f"{module}.{name} is now {module}.{names[name]}: the old name will go",

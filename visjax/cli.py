@@ -356,11 +356,11 @@ def _check(a) -> None:
 def _check_study(a) -> None:
     """A study's size and grid, before any compile (`verbs.check_study`: the run count,
     the grid's parameter names and values on the built problem, a lower bound of the
-    memory it needs)."""
+    memory it needs); the problems it built go to the command (`built`: built once)."""
 
     shard = getattr(a, "shard", None)
     try:
-        check_study(
+        a.built = check_study(
             a.command, a.problem, grid=getattr(a, "grid", None), seeds=a.seeds,
             chunk=getattr(a, "chunk", 64), steps=getattr(a, "steps", 0), data=a.data,
             noise=a.noise, duration=a.duration, rate=a.rate, variants=a.set, robust=a.robust,

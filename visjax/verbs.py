@@ -17,8 +17,6 @@ before any work (`Refused`). With a data file in one of the papers' formats, eve
 summary reports `dropped_fraction`.
 """
 
-import functools
-import os
 import shutil
 import sys
 import time
@@ -27,14 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from . import studies
-from ._results import result_names
 from .io import (
-    DROPPED_RESULT,
-    MAX_DROPPED_FRACTION,
     command_summary,
-    coverage_line,
+    dropped_report,
     figure_files,
-    file_coverage,
     output_name,
     user_path,
     written_directly,
@@ -45,18 +39,14 @@ from .studies import (
     MemoryLimitError,
     Refused,
     Study,
-    as_json,
     check_grid,
     check_run_count,
     clear_parts,
-    find_parts,
     grid_size,
     innovation_line,
-    merge_parts,
-    quality,
     quality_line,
-    read_manifest,
     registered,
+    saved_runs,
     solution,
     solution_table,
     study_runs,
@@ -69,7 +59,7 @@ unlike a sweep)."""
 
 
 def _settings(arguments: dict) -> dict:
-    out = {k: v for k, v in arguments.items() if k != "started"}
+    out = {k: v for k, v in arguments.items() if k not in ("started", "built")}
     for k in ("data", "out"):
         if out.get(k) is not None:
             out[k] = str(out[k])
@@ -77,17 +67,6 @@ def _settings(arguments: dict) -> dict:
         out["variants"] = list(out["variants"])
     out["formats"] = list(out.get("formats", ()))
     return out
-
-
-@functools.lru_cache(maxsize=16)
-def _built(name, data, stamp, noise, duration, rate, variant, robust=False, options=()):
-    """A problem, cached per process (a data file by its path and modification time): a
-    `tune` after a `sweep` of the same problem reuses its set-up and compiled runs."""
-
-    return registered(name).make(
-        data=data, noise_px=noise, duration=duration, rate_hz=rate, variant=variant,
-        robust=True if robust else None, **dict(options),
-    )  # fmt: skip
 
 
 def problems(
@@ -102,13 +81,14 @@ def problems(
     (a problem without robust settings takes no `--robust`)."""
 
     entry = registered(name)
-    stamp = None if data is None else os.path.getmtime(data)
     data = None if data is None else str(data)
-
-    extra = tuple(sorted((k, v) for k, v in (options or {}).items() if v is not None))
+    extra = {k: v for k, v in (options or {}).items() if v is not None}
 
     def build(variant):
-        return _built(entry.name, data, stamp, noise, duration, rate, variant, robust, extra)
+        return entry.make(
+            data=data, noise_px=noise, duration=duration, rate_hz=rate, variant=variant,
+            robust=True if robust else None, **extra,
+        )  # fmt: skip
 
     entry.check(data, duration, rate, variants)
     if variants:
@@ -121,17 +101,18 @@ def problems(
 def check_study(
     command, problem, *, grid=None, seeds=1, chunk=64, steps=0, data=None, noise=0.1,
     duration=None, rate=None, variants=None, robust=False, shard=None,
-) -> None:  # fmt: skip
+) -> list | None:  # fmt: skip
     """What the command line checks of `compare`, `sweep` and `tune` before any work:
     the run count (at most `studies.MAX_RUNS`; first from the grid's text, before the
-    problem is built), then on the built problem (cached: the command reuses it) the
+    problem is built), then on the problem, built once (the command takes it: `built`), the
     grid (`studies.check_grid`: `--grid`, or the problem's default) and `studies.plan`
     (the run count again, a lower bound of the memory against `available_memory()`, of
     the job's slice with `shard=(i, N)`). (The sweep then measures a chunk's compiled
     program before it runs one: `Study.max_memory`.) **Raises:** `Refused`, one line; what
-    building the problem raises (a data file's `DataFormatError`)."""
+    building the problem raises (a data file's `DataFormatError`). **Returns:** the built
+    problems, `[(tag, problem)]`, for the command (`built=`: each problem built once)."""
     if command not in ("compare", "sweep", "tune"):
-        return
+        return None
     count = 1 if grid is None else grid_size(grid)
     n_variants = len(variants) if variants else 1
     if count is not None:
@@ -150,6 +131,7 @@ def check_study(
         found.check(where)
         total += found.runs
     check_run_count(command, total, f"{len(built)} problem(s), their grids and {seeds} seeds")
+    return built
 
 
 def _folder(out, tag):
@@ -186,6 +168,7 @@ def run_command(
     quiet: bool = False,
     formats=("png",),
     options=None,
+    built=None,
 ) -> dict:
     """`visjax run PROBLEM`: one method (default the estimator) once, on the problem's
     scene or data file with `noise` px of pixel noise (seed `seed`; `options`: more of the
@@ -202,41 +185,27 @@ def run_command(
 
     results, failures = {}, []
     dropped = _dropped(problem, data)
-    for tag, p in problems(
+    for tag, p in built or problems(
         problem, data, noise, duration, rate, variants, every=False, robust=robust,
         options=options,
     ):  # fmt: skip
         m = p.check_method(method)
         sol = jax.block_until_ready(solution(p, None, seed, method=m))
-        code = result_names(sol.result)
-        failed_sample = int(np.asarray(getattr(sol, "failed_sample", -1)))
-        values = jax.tree_util.tree_map(np.asarray, p.metrics(m, sol))
-        ok = code == "successful" and all(np.all(np.isfinite(v)) for v in values.values())
-        if code == "successful" and not ok:  # a metric that is NaN: not a success
-            code = "nonfinite_output"
-        head = f"[{tag}] " if tag else ""
-        failure = None
+        v = studies.verdict(p, m, sol, p.inputs(jax.random.key(seed)))
+        code, judged, head, failure = v.result, v.quality, f"[{tag}] " if tag else "", None
         if code != "successful":
-            at = f" at sample {failed_sample}" if failed_sample >= 0 else ""
+            at = f" at sample {v.failed_sample}" if v.failed_sample >= 0 else ""
             failure = f"run {problem}: {head}the run failed: {code}{at}"
         elif dropped is not None and dropped["over"]:
             code = dropped["result"]
             failure = f"run {problem}: {head}the result is {code}: {dropped['line']}"
-        inputs = p.inputs(jax.random.key(seed))
-        innovation = p.innovation(m, p.resolve({}), sol, inputs) if ok else None
-        judged = quality(p, values, innovation=innovation) if ok else None
-        if failure is None and judged is not None and judged["flag"] == "worse_than_trivial":
-            code = judged["flag"]
+        elif v.worse_than_trivial:
+            code = "worse_than_trivial"
             failure = f"run {problem}: {head}the result is {code}: {quality_line(judged)}"
         body = {
-            "problem": p.title,
-            "method": m,
-            "result": code,
-            "failed_sample": failed_sample,
-            "metrics": as_json(values, ok),
-            "gains": p.gains({}),
-            "problem_settings": p.settings(),
-        }
+            "problem": p.title, "method": m, "result": code, "failed_sample": v.failed_sample,
+            "metrics": v.metrics_json(), "gains": p.gains({}), "problem_settings": p.settings(),
+        }  # fmt: skip
         if dropped is not None:
             body["dropped_fraction"] = dropped["fraction"]
         if judged is not None:
@@ -270,53 +239,9 @@ def run_command(
     return summary
 
 
-def _judge_records(problem, records: list, body: dict) -> dict | None:
-    """Each successful record's `ratio_to_trivial` (`studies.quality`), and into `body` the
-    `quality` of the comparison: the trivial estimate, its metric, the threshold and, per
-    method, the runs no better than it. **Returns:** that count per method (`None` for a
-    problem without a trivial estimate)."""
-
-    counts: dict[str, int] = {m: 0 for m in problem.methods}
-    judged, trivial = None, problem.trivial() if problem.scored else {}
-    for r in records:
-        value = r.get(problem.metric)
-        if r["result"] != "successful" or value is None:
-            continue
-        judged = quality(problem, {problem.metric: value}, trivial)
-        if judged is None:
-            return None
-        r["ratio_to_trivial"] = judged["ratio_to_trivial"]
-        counts[r["method"]] += judged["flag"] != "ok"
-    if judged is None:
-        return None
-    body["quality"] = {
-        "trivial_estimate": judged["trivial_estimate"],
-        "metric": judged["metric"],
-        "trivial": judged["trivial"],
-        "threshold": judged["threshold"],
-        "worse_than_trivial": counts,
-    }
-    return counts
-
-
 def _dropped(problem, data) -> dict | None:
-    """The data file's frames with a feature missing, for a problem in one of the papers'
-    formats: `fraction`, `over` (above `visjax.io.MAX_DROPPED_FRACTION`), `result` (the
-    result code it makes of a successful run) and the printed `line`; `None` without a
-    data file or for a format of its own."""
-    if data is None:
-        return None
-
-    cover = file_coverage(registered(problem).name, data)
-    if cover is None:
-        return None
-    fraction, frames = cover
-    return {
-        "fraction": fraction,
-        "over": fraction > MAX_DROPPED_FRACTION,
-        "result": DROPPED_RESULT,
-        "line": coverage_line(fraction, frames),
-    }
+    """`io.dropped_report` of the data file of the registered problem `problem`."""
+    return None if data is None else dropped_report(registered(problem).name, data)
 
 
 def _say_dropped(body: dict, dropped, head: str) -> None:
@@ -340,6 +265,7 @@ def compare_command(
     variants=None,
     robust: bool = False,
     max_hours: float = MAX_HOURS,
+    built=None,
 ) -> dict:
     """`visjax compare PROBLEM`: every method of the problem (the estimator, its batch
     baselines, its EKF) on identical noisy inputs (`visjax.studies.compare`, noise seeds
@@ -358,7 +284,7 @@ def compare_command(
 
     results = {}
     dropped = _dropped(problem, data)
-    for tag, p in problems(
+    for tag, p in built or problems(
         problem, data, noise, duration, rate, variants, every=False, robust=robust
     ):
         try:
@@ -379,7 +305,9 @@ def compare_command(
         label = p.label or p.metric
         print(f"{head}{p.title}: {seeds} noise seed(s); {p.metric}: {label}")
         _say_dropped(body, dropped, head)
-        worse = _judge_records(p, records, body)
+        worse, judged = studies.judge_records(p, records)
+        if judged is not None:
+            body["quality"] = judged
         # the problem's predicted spread (`uncertainty`: keys `<metric>_std`), if any
         std_key = next((k for k in records[0] if k.endswith("_std")), None)
         std_head = f"{'predicted ' + std_key:>28}" if std_key else ""
@@ -476,23 +404,12 @@ def _selected(problem, grid, seeds, first, study, tune=None):
 
 
 def _job_slice(shard):
-    """`--shard` without a value (or `True`): every chunk over every JAX device (a mesh);
-    `--shard i/N` (or `(i, N)`): the i-th of N disjoint slices of the runs (a job array).
-    **Returns:** `(devices, slice)`."""
-    if shard is None or shard is False:
-        return False, None
+    """`shard` as the command line parses it (`--shard`): `True` (or `"devices"`): every
+    chunk over every JAX device (a mesh); `(i, N)`: the i-th of N disjoint slices of the
+    runs (a job array; checked by `studies.Study`). **Returns:** `(devices, slice)`."""
     if shard is True or shard == "devices":
         return True, None
-    if isinstance(shard, str):
-        try:
-            i, n = (int(x) for x in shard.split("/"))
-        except ValueError:
-            raise ValueError(f"--shard {shard!r}: expected i/N, e.g. 0/8") from None
-    else:
-        i, n = (int(x) for x in shard)
-    if not (n >= 1 and 0 <= i < n):
-        raise ValueError(f"--shard {shard!r}: expected i/N with 0 <= i < N")
-    return False, (i, n)
+    return False, (None if shard in (None, False) else tuple(shard))
 
 
 def _parts_folder(folder: Path, job) -> Path:
@@ -528,16 +445,6 @@ def _refuse_finished(folder: Path, parts: Path, resume: bool, force: bool) -> No
         )
 
 
-def _saved_runs(parts: Path) -> tuple[int, int]:
-
-    try:
-        m = read_manifest(parts)
-    except ValueError:
-        return 0, 0
-    n, chunk = m["n_runs"], m["chunk"]
-    return sum(min(chunk, n - c * chunk) for c in m["done"]), n
-
-
 def _print_result(tag, problem, held, extra=""):
     head = f"[{tag}] " if tag else ""
     for name, r in held.items():
@@ -549,6 +456,32 @@ def _print_result(tag, problem, held, extra=""):
         )
     if extra:
         print(f"{head}{extra}")
+
+
+def _point(held, name) -> dict:
+    return {"params": held[name]["params"], "metric": held[name]["metric"]}
+
+
+def _common_result(p, found, spec, noise, seeds, seed, chosen) -> dict:
+    """The keys of a sweep's and a tuning's summary they share (`chosen`: the held-out
+    point reported as `best`)."""
+    return {
+        "metric": p.metric, "best": _point(found.held, chosen),
+        "paper": _point(found.held, "paper"), "problem": p.title, "grid": spec,
+        "noise_px": noise, "seeds": seeds, "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
+    }  # fmt: skip
+
+
+def _write_sweep(folder, p, found, chosen, formats) -> None:
+    """A sweep's table (`runs.parquet`, `runs.csv`) and its figure (`sweep.<format>`: the
+    metric against each parameter, `chosen` and the defaults marked, held-out)."""
+    studies.save_table(found.sweep, folder)
+    plot_sweep(
+        found.summary, p.metric, list(found.best["params"]), best=found.held[chosen],
+        paper=found.held["paper"], paper_label=p.defaults_label, label=p.label, title=p.title,
+        path=folder / "sweep.png", units={k: v.units for k, v in p.parameters().items()},
+        formats=formats,
+    )  # fmt: skip
 
 
 def sweep_command(
@@ -570,6 +503,7 @@ def sweep_command(
     resume: bool = False,
     force: bool = False,
     ray=None,
+    built=None,
 ) -> dict:
     """`visjax sweep PROBLEM`: a grid of the problem's parameters (`--grid`, default the
     problem's) over `seeds` noise seeds from `seed` (`studies.sweep`), the best point by
@@ -602,6 +536,7 @@ def sweep_command(
         return _sweeps(
             problem, grid, noise, seeds, data, duration, rate, variants, chunk, out, quiet,
             seed, formats, resume, force, devices, job, executor, settings, started, robust,
+            built,
         )  # fmt: skip
     finally:
         if executor is not None:
@@ -611,12 +546,13 @@ def sweep_command(
 def _sweeps(
     problem, grid, noise, seeds, data, duration, rate, variants, chunk, out, quiet, seed,
     formats, resume, force, devices, job, executor, settings, started, robust=False,
+    built=None,
 ):  # fmt: skip
 
     say = None if quiet else print
     results, mesh = {}, _mesh(devices)
     dropped = _dropped(problem, data)
-    for tag, p in problems(problem, data, noise, duration, rate, variants, robust=robust):
+    for tag, p in built or problems(problem, data, noise, duration, rate, variants, robust=robust):
         if not p.scored:
             raise ValueError(f"{p.title}: a sweep needs the truth (the data file has none)")
         folder = _folder(out, tag)
@@ -635,7 +571,7 @@ def _sweeps(
         except KeyboardInterrupt:
             if folder is None:
                 raise
-            done, n = _saved_runs(parts)
+            done, n = saved_runs(parts)
             sys.stderr.write(
                 f"visjax: interrupted: {done} of {n} runs are saved in {parts}; "
                 "run the same command with --resume to continue\n"
@@ -654,16 +590,9 @@ def _sweeps(
                 "sweep_shard", body, settings=settings, seed=seed, started=started, out=None
             )
             continue
-        table, summary, best, held = found.sweep, found.summary, found.best, found.held
+        table, best = found.sweep, found.best
         result = {
-            "metric": p.metric,
-            "best": {"params": held["best"]["params"], "metric": held["best"]["metric"]},
-            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
-            "problem": p.title,
-            "grid": spec,
-            "noise_px": noise,
-            "seeds": seeds,
-            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
+            **_common_result(p, found, spec, noise, seeds, seed, "best"),
             "best_training_metric": best["metric"],
             "best_gains": p.gains(best["params"]),
             "paper_gains": p.gains({}),
@@ -672,23 +601,11 @@ def _sweeps(
             "problem_settings": p.settings(),
             **p.checks(best["params"]),
         }
-        _print_result(tag, p, held, f"{result['failed_runs']} of {len(table)} sweep runs failed")
+        failed = f"{result['failed_runs']} of {len(table)} sweep runs failed"
+        _print_result(tag, p, found.held, failed)
         _say_dropped(result, dropped, f"[{tag}] " if tag else "")
         if folder is not None:
-            studies.save_table(table, folder)
-            plot_sweep(
-                summary,
-                p.metric,
-                list(best["params"]),
-                best=held["best"],
-                paper=held["paper"],
-                paper_label=p.defaults_label,
-                label=p.label,
-                title=p.title,
-                path=folder / "sweep.png",
-                units={k: v.units for k, v in p.parameters().items()},
-                formats=formats,
-            )
+            _write_sweep(folder, p, found, "best", formats)
             # the parts come along with the other outputs (a copy: until the outputs are
             # in place, the parts where they were written stay whole)
             shutil.copytree(parts, folder / "parts", dirs_exist_ok=True)
@@ -710,17 +627,8 @@ def merge_command(paths, out=None, quiet: bool = False) -> dict:
     started = time.perf_counter()
     settings = _settings(locals())
 
-    folders = find_parts(paths)
-    groups: dict[str, list] = {}
-    for f in folders:
-        groups.setdefault(read_manifest(f)["identity"], []).append(f)
     results = {}
-    for identity, members in groups.items():
-        table, manifest = merge_parts(members)
-        # a sweep over variants: its parts folders are in the variants' folders
-        tag = Path(members[0]).parent.name if len(groups) > 1 else None
-        if tag is not None and tag in results:
-            tag = f"{tag}_{identity[:8]}"
+    for tag, (table, manifest, members) in studies.merge_sweeps(paths).items():
         metric = manifest.get("info", {}).get("metric")
         body = {
             "runs": len(table),
@@ -765,6 +673,7 @@ def tune_command(
     quiet: bool = False,
     seed: int = 0,
     formats=("png",),
+    built=None,
 ) -> dict:
     """`visjax tune PROBLEM`: a sweep of the grid (`--grid`, default the problem's) on
     `seeds` training seeds, then `studies.tune` (Adam on the log parameters, forward-mode
@@ -775,14 +684,13 @@ def tune_command(
     started = time.perf_counter()
     settings = _settings(locals())
     import optax
-    import pandas as pd
 
     devices, job = _job_slice(shard)
     if job is not None:
         raise ValueError("--shard i/N is for sweep (tune follows one path: it needs every run)")
     results, mesh = {}, _mesh(devices)
     dropped = _dropped(problem, data)
-    for tag, p in problems(problem, data, noise, duration, rate, variants, robust=robust):
+    for tag, p in built or problems(problem, data, noise, duration, rate, variants, robust=robust):
         if not p.scored:
             raise ValueError(f"{p.title}: tuning needs the truth (the data file has none)")
         study = studies.Study(
@@ -791,23 +699,11 @@ def tune_command(
         )  # fmt: skip
         optimiser = (optax.adam(learning_rate), steps)
         spec, found = _selected(p, grid, seeds, seed, study, tune=optimiser)
-        table, summary, best, held, tuned = (
-            found.sweep, found.summary, found.best, found.held, found.tuned,
-        )  # fmt: skip
+        held, tuned = found.held, found.tuned
         result = {
-            "metric": p.metric,
-            "best": {"params": held["tuned"]["params"], "metric": held["tuned"]["metric"]},
-            "paper": {"params": held["paper"]["params"], "metric": held["paper"]["metric"]},
-            "sweep_best": {
-                "params": held["sweep best"]["params"],
-                "metric": held["sweep best"]["metric"],
-            },
+            **_common_result(p, found, spec, noise, seeds, seed, "tuned"),
+            "sweep_best": _point(held, "sweep best"),
             "improvement_over_paper": held["paper"]["metric"] / held["tuned"]["metric"],
-            "problem": p.title,
-            "grid": spec,
-            "noise_px": noise,
-            "seeds": seeds,
-            "held_out_seeds": [seed + seeds, seed + 2 * seeds - 1],
             "steps": steps,
             "optimiser": f"optax.adam({learning_rate}) on the log parameters, forward mode",
             "training_loss": {"sweep_best": tuned.loss0, "tuned": tuned.loss},
@@ -824,21 +720,8 @@ def tune_command(
         _say_dropped(result, dropped, f"[{tag}] " if tag else "")
         folder = _folder(out, tag)
         if folder is not None:
-            studies.save_table(table, folder)
-            pd.DataFrame(tuned.history).to_csv(folder / "history.csv", index=False)
-            plot_sweep(
-                summary,
-                p.metric,
-                list(best["params"]),
-                best=held["tuned"],
-                paper=held["paper"],
-                paper_label=p.defaults_label,
-                label=p.label,
-                title=p.title,
-                path=folder / "sweep.png",
-                units={k: v.units for k, v in p.parameters().items()},
-                formats=formats,
-            )
+            _write_sweep(folder, p, found, "tuned", formats)
+            tuned.to_pandas().to_csv(folder / "history.csv", index=False)
             plot_tune_history(
                 tuned.history,
                 label=f"training {p.label}",

@@ -61,9 +61,9 @@ def test_bad_input():
 
 
 def _A(u):
-    from visjax.estimators import THESIS_A_U
+    from visjax.estimators import MOVING_POINT_A_U
 
-    return np.einsum("j,jab->ab", np.asarray(u, float), THESIS_A_U)
+    return np.einsum("j,jab->ab", np.asarray(u, float), MOVING_POINT_A_U)
 
 
 @pytest.mark.parametrize("alpha", [0.3, 1.0])

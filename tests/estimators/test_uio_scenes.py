@@ -15,7 +15,7 @@ from tests.helpers import central_difference
 from visjax import RESULTS
 from visjax.design import design_uio
 from visjax.estimators import (
-    THESIS_A_U,
+    MOVING_POINT_A_U,
     MovingPointEstimator,
     MovingPointMeasurement,
     SaveAt,
@@ -133,7 +133,7 @@ def test_uub_split_error_is_the_predicted_bias_and_within_the_bound():
     e_ss = N^-1 M D2 d2 exactly (an independent prediction from `disturbance_input`), which
     lies inside `MovingPointDesign.ultimate_bound`, and which scales with d2."""
     u = np.array([0.3, 0.2, 0.0, 0.0, 0.0, 0.0])
-    A = np.einsum("j,jab->ab", u, THESIS_A_U)
+    A = np.einsum("j,jab->ab", u, MOVING_POINT_A_U)
     D1, D2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
     d = design_uio(A, C, D1, 1e-3, uub=True, alpha=1.0)
     obs = MovingPointEstimator(A=A, D=D1, D2=D2, K=d.K, Y=d.Y, x3_guess=0.3)
@@ -152,16 +152,22 @@ def test_uub_split_error_is_the_predicted_bias_and_within_the_bound():
 
 
 def test_time_varying_A_at_constant_velocity_equals_the_fixed_observer():
-    """A(u) from THESIS_A_U at a constant camera velocity is the fixed A = A(u): the
+    """A(u) from MOVING_POINT_A_U at a constant camera velocity is the fixed A = A(u): the
     time-varying observer (with the design's P as its certificate) and the fixed one give
     the same estimates."""
     sc, stream = _constant_velocity_scene([0.05, 0.0, 0.0], duration=1.0)
     u = np.asarray(sc.camera_velocity[0])
-    A = np.einsum("j,jab->ab", u, THESIS_A_U)
+    A = np.einsum("j,jab->ab", u, MOVING_POINT_A_U)
     d = design_uio(A, C, [1.0, 0.0, 0.0], 1e-3, alpha=0.5)
     fixed = MovingPointEstimator(A=A, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3)
     varying = MovingPointEstimator(
-        A=np.zeros((3, 3)), A_u=THESIS_A_U, P=d.P, D=[1.0, 0.0, 0.0], K=d.K, Y=d.Y, x3_guess=0.3
+        A=np.zeros((3, 3)),
+        A_u=MOVING_POINT_A_U,
+        P=d.P,
+        D=[1.0, 0.0, 0.0],
+        K=d.K,
+        Y=d.Y,
+        x3_guess=0.3,
     )
     a = run(fixed, stream, saveat=SaveAt(every=50)).outputs.x_hat
     b = run(varying, stream, saveat=SaveAt(every=50)).outputs.x_hat

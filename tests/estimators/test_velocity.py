@@ -18,14 +18,13 @@ from visjax.estimators import (
     depth_from_known_length,
     diagonal_intersection,
     fixed_camera,
-    paper_eq56_matrix,
     plane_normal_from_frames,
     run,
     velocity_measurements,
     velocity_stream,
 )
 from visjax.geometry import euclidean_reconstruction, pixel_to_normalized, project, so3_exp
-from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, section6_scenario
+from visjax.papers.chitrakaran import K_EQ63, RHO_EQ63, eq56_matrix, section6_scenario
 
 K = jnp.array(K_EQ63)
 RHO = jnp.array(RHO_EQ63)
@@ -93,7 +92,7 @@ def test_depth_recovery_and_the_singular_eq56():
         rec = euclidean_reconstruction(p_ref, sc.pixels[k], sc.A, n_star=n_star)
         m1s = np.append(pixel_to_normalized(p_ref[0], sc.A), 1.0)
         m1 = np.append(pixel_to_normalized(sc.pixels[k, 0], sc.A), 1.0)
-        M = paper_eq56_matrix(m1s, m1, rec.alpha[0], n_star, rec.x_h, rec.R_bar)
+        M = eq56_matrix(m1s, m1, rec.alpha[0], n_star, rec.x_h, rec.R_bar)
         sv = np.linalg.svd(np.asarray(M), compute_uv=False)
         assert sv[-1] < 1e-10 * sv[0]
         np.testing.assert_allclose(M @ (sc.x_f_star + sc.R_star @ sc.s[0]), 0.0, atol=1e-10)

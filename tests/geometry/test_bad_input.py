@@ -14,7 +14,7 @@ from visjax.geometry import (
     feature_in_camera,
     find_homography,
     intrinsic_matrix,
-    intrinsics_eq4,
+    intrinsics_from_camera,
     known_feature_regressors,
     pixel_to_normalized,
     project,
@@ -114,7 +114,7 @@ def test_shapes_that_were_accepted_silently(no_jaxtyping):
     with pytest.raises(ValueError, match=r"`fx` must have shape \(\)"):
         intrinsic_matrix(np.zeros(2), 1.0, 1.0, 1.0)
     with pytest.raises(ValueError, match=r"`f` must have shape \(\)"):
-        intrinsics_eq4(np.zeros(2), 1.0, 1.0, 1.5, 1.0, 1.0)
+        intrinsics_from_camera(np.zeros(2), 1.0, 1.0, 1.5, 1.0, 1.0)
 
 
 def test_g33_zero_is_named_and_large_pixels_are_not():

@@ -9,7 +9,7 @@ from visjax.geometry import (
     camera_from_parameters,
     camera_parameters,
     feature_in_camera,
-    intrinsics_eq4,
+    intrinsics_from_camera,
     known_feature_regressors,
     project,
     so3_exp,
@@ -18,7 +18,7 @@ from visjax.geometry import (
 
 
 def _random_configuration(rng):
-    A = intrinsics_eq4(
+    A = intrinsics_from_camera(
         rng.uniform(0.005, 0.01),
         rng.uniform(8e4, 1.2e5),
         rng.uniform(8e4, 1.2e5),
@@ -57,11 +57,11 @@ def test_regressors_reproduce_the_projection():
 
 
 def test_intrinsics_skew_angle():
-    A = intrinsics_eq4(0.008, 1e5, 1e5, np.pi / 2, 320.0, 240.0)
+    A = intrinsics_from_camera(0.008, 1e5, 1e5, np.pi / 2, 320.0, 240.0)
     np.testing.assert_allclose(
         A, [[800.0, 0.0, 320.0], [0.0, 800.0, 240.0], [0.0, 0.0, 1.0]], atol=1e-10
     )
-    A = intrinsics_eq4(0.008, 1e5, 1e5, np.pi / 3, 320.0, 240.0)
+    A = intrinsics_from_camera(0.008, 1e5, 1e5, np.pi / 3, 320.0, 240.0)
     np.testing.assert_allclose(A[0, 1], 800.0 / np.tan(np.pi / 3), rtol=1e-12)
 
 

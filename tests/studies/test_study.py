@@ -79,6 +79,7 @@ def test_version3_forms_warn_and_give_the_same_numbers():
     with pytest.warns(FutureWarning, match="Study"):
         old = studies.sweep(p, points, keys, chunk=4)
     pd.testing.assert_frame_equal(old.to_pandas(), new)
+    assert old.equals(new) and not old.equals(new.iloc[:-1])  # a SweepResult or a frame
     with pytest.warns(FutureWarning, match="FunctionProblem"):
         fn = studies.sweep(weighted, points, keys, metrics=error)
     np.testing.assert_allclose(fn["error"], new["error"], rtol=1e-12)

@@ -236,8 +236,9 @@ sys.path.insert(0, {root!r})
 from tests.studies.test_sweep import toy, toy_metrics
 mesh = Mesh(np.array(jax.devices()), ("runs",))
 params = studies.grid(a=[1.0, 2.0, 3.0, 6.0, 0.5])
-sharded = studies.sweep(toy, params, jnp.arange(3), metrics=toy_metrics, chunk=6, mesh=mesh)
-plain = studies.sweep(toy, params, jnp.arange(3), metrics=toy_metrics, chunk=6)
+problem = studies.FunctionProblem(toy, toy_metrics)
+sharded = studies.sweep(problem, params, jnp.arange(3), study=studies.Study(chunk=6, mesh=mesh))
+plain = studies.sweep(problem, params, jnp.arange(3), study=studies.Study(chunk=6))
 print(json.dumps({{"devices": len(jax.devices()), "process": jax.process_index(),
     "equal": bool(sharded.equals(plain)), "rows": len(sharded),
     "table": sharded.to_json()}}))
@@ -283,7 +284,7 @@ from visjax import papers
 setup = papers.velocity_problem(noise_px=0.1, duration=2.0)
 params = {{"K_scale": np.array([0.01, 1.0, 10.0]), "rho_scale": np.array([0.1, 1.0, 1.0])}}
 mesh = Mesh(np.array(jax.devices()), ("runs",))
-t = studies.sweep(setup, params, jnp.arange(2), mesh=mesh)
+t = studies.sweep(setup, params, jnp.arange(2), study=studies.Study(mesh=mesh)).to_pandas()
 print(json.dumps({{"devices": len(jax.devices()), "process": jax.process_index(),
     "table": t.to_json(double_precision=15)}}))
 """

@@ -23,7 +23,11 @@ from ._losses import (
     covariance as covariance,
     huber as huber,
 )
-from ._opencv import opencv_reconstruction as opencv_reconstruction
+from ._opencv import (
+    opencv_reconstruction as opencv_reconstruction,
+    ransac_homographies as ransac_homographies,
+)
+from ._point_depth import InverseDepthModel as InverseDepthModel
 from ._point_fit import (
     TriangulationDiagnostics as TriangulationDiagnostics,
     camera_poses as camera_poses,

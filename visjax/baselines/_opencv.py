@@ -1,6 +1,11 @@
-"""The section-3 reconstruction of Chitrakaran et al. with OpenCV, for comparison."""
+"""OpenCV as a baseline, imported inside calls only: the section-3 reconstruction of
+Chitrakaran et al. (`opencv_reconstruction`) and RANSAC homographies per frame
+(`ransac_homographies`, the homography problem's `ransac` method)."""
 
+import jax
+import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Float
 
 
 def opencv_reconstruction(p_ref, p_cur, A, n_prior) -> dict:
@@ -33,3 +38,38 @@ def opencv_reconstruction(p_ref, p_cur, A, n_prior) -> dict:
         "alpha": beta / g33,
         "H": g33 * H,
     }
+
+
+def _ransac_host(reference, pixels, threshold):
+    import cv2
+
+    reference = np.asarray(reference, np.float64)
+    out = np.full(pixels.shape[:-2] + (3, 3), np.nan)
+    flat = np.asarray(pixels, np.float64).reshape((-1,) + pixels.shape[-2:])
+    ref = np.broadcast_to(reference, pixels.shape[:-3] + reference.shape[-2:]).reshape(
+        (-1,) + reference.shape[-2:]
+    )
+    frames = pixels.shape[-3]
+    res = out.reshape((-1, 3, 3))
+    for k in range(flat.shape[0]):
+        G, _ = cv2.findHomography(ref[k // frames], flat[k], cv2.RANSAC, float(threshold))
+        if G is not None:
+            res[k] = G
+    return res.reshape(out.shape)
+
+
+def ransac_homographies(
+    reference: Float[ArrayLike, "n 2"],
+    pixels: Float[ArrayLike, "N n 2"],
+    *,
+    threshold_px: float = 3.0,
+) -> Float[Array, "N 3 3"]:
+    """OpenCV's `cv2.findHomography(reference, pixels[k], cv2.RANSAC, threshold_px)` at each
+    frame, through `jax.pure_callback` (so it runs under `jit` and `vmap`, one frame after
+    another on the host; not differentiable): the projective homographies $G_k$,
+    $p \\sim G_k \\mathring p$ (N, 3, 3), NaN where OpenCV found none."""
+    reference, pixels = jnp.asarray(reference), jnp.asarray(pixels)
+    shape = jax.ShapeDtypeStruct(pixels.shape[:-2] + (3, 3), pixels.dtype)
+    return jax.pure_callback(
+        _ransac_host, shape, reference, pixels, threshold_px, vmap_method="expand_dims"
+    )

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..estimators import THESIS_A_U, rank_condition, uio_matrices
+from ..estimators import MOVING_POINT_A_U, rank_condition, uio_matrices
 
 _MARGIN = 1e-6
 
@@ -291,7 +291,7 @@ def design_uio(
       restriction: the structured LMI may be infeasible where the full one is not).
     - `u_range`: `(u_min, u_max)`, each (6,): the range of the camera velocity
       $u = [v_c, \\omega]$. The design is then polytopic: $A(u) = A + \\sum_j u_j A_{u,j}$
-      (`A_u`, default `THESIS_A_U`, the thesis' $A$ of the camera velocities) and
+      (`A_u`, default `MOVING_POINT_A_U`, the thesis' $A$ of the camera velocities) and
       $K(u) = K + \\sum_j u_j K_{u,j}$ for the varying components ($K_{u,j}$ free where
       `K_u_pattern` (6, 3, 2) allows, default every entry of every varying component);
       one $P$ for all vertices of the box. $N(u)^TP + PN(u)$ is affine in $u$, so the
@@ -353,7 +353,7 @@ def design_uio(
         K_u_pattern = None
     else:
         u_list, varying = _vertices(u_range)
-        A_u_arr = THESIS_A_U.copy() if A_u is None else np.asarray(A_u, float)
+        A_u_arr = MOVING_POINT_A_U.copy() if A_u is None else np.asarray(A_u, float)
         if A_u_arr.shape != (6, 3, 3):
             raise ValueError(f"`A_u` must have shape (6, 3, 3); got {A_u_arr.shape}.")
         if K_u_pattern is None:

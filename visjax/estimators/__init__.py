@@ -1,6 +1,14 @@
 """The papers' observers and update laws, the contract they fulfil and the runner they share."""
 
 from .._util import renamed as _renamed
+from ._active_point_depth import (
+    ActivePointDepth as ActivePointDepth,
+    ActivePointDepthOutput as ActivePointDepthOutput,
+    ActivePointDepthState as ActivePointDepthState,
+    active_sigma2 as active_sigma2,
+    active_velocity as active_velocity,
+    servo_angular_velocity as servo_angular_velocity,
+)
 from ._adaptive_ls import (
     StaticPointsDiagnostics as StaticPointsDiagnostics,
     StaticPointsEstimator as StaticPointsEstimator,
@@ -34,8 +42,27 @@ from ._base import (
     run as run,
 )
 from ._filters import lowpass as lowpass, lowpass_delay as lowpass_delay
+from ._homography import (
+    HomographyEstimator as HomographyEstimator,
+    HomographyMeasurement as HomographyMeasurement,
+    HomographyOutput as HomographyOutput,
+    HomographyState as HomographyState,
+    homography_bearings as homography_bearings,
+    homography_innovation as homography_innovation,
+    homography_stream as homography_stream,
+    unit_bearings as unit_bearings,
+)
+from ._point_depth import (
+    PointDepthEstimator as PointDepthEstimator,
+    PointDepthMeasurement as PointDepthMeasurement,
+    PointDepthOutput as PointDepthOutput,
+    PointDepthState as PointDepthState,
+    point_depth_rate as point_depth_rate,
+    point_depth_stream as point_depth_stream,
+    point_model as point_model,
+)
 from ._uio import (
-    THESIS_A_U as THESIS_A_U,
+    MOVING_POINT_A_U as MOVING_POINT_A_U,
     MovingPointEstimator as MovingPointEstimator,
     MovingPointMeasurement as MovingPointMeasurement,
     MovingPointOutput as MovingPointOutput,
@@ -60,7 +87,6 @@ from ._velocity import (
     error_signal as error_signal,
     fixed_camera as fixed_camera,
     kinematics_jacobian as kinematics_jacobian,
-    paper_eq56_matrix as paper_eq56_matrix,
     plane_normal_from_frames as plane_normal_from_frames,
     velocity_innovation as velocity_innovation,
     velocity_measurements as velocity_measurements,
@@ -76,6 +102,9 @@ RENAMED = {
     "AdaptiveOutput": "StaticPointsOutput",
     "AdaptiveDiagnostics": "StaticPointsDiagnostics",
     "PlatformMeasurement": "StaticPointsMeasurement",
+    "THESIS_A_U": "MOVING_POINT_A_U",
 }
 """The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
-__getattr__ = _renamed("visjax.estimators", RENAMED, globals())
+MOVED = {"paper_eq56_matrix": "visjax.papers.chitrakaran.eq56_matrix"}
+"""Names that moved to another package (old -> where they are now)."""
+__getattr__ = _renamed("visjax.estimators", RENAMED, globals(), moved=MOVED)

@@ -38,7 +38,7 @@ from ._base import (
 C_OUTPUT = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))  # y = C x, eq. (3.1)
 
 
-def _thesis_A_u() -> np.ndarray:
+def _moving_point_A_u() -> np.ndarray:
     """$A(u) = \\sum_j u_j A_j$ with $A(u) = [[0, \\omega_z, -v_{cx}], [-\\omega_z, 0,
     -v_{cy}], [0, 0, 0]]$, the thesis' $A$ of the camera velocities (Jang's thesis, ch. 6;
     THESIS_NOTES ch. 3.4, restored); $u = [v_{cx}, v_{cy}, v_{cz}, \\omega_x, \\omega_y,
@@ -51,9 +51,9 @@ def _thesis_A_u() -> np.ndarray:
     return A_u
 
 
-THESIS_A_U = _thesis_A_u()
+MOVING_POINT_A_U = _moving_point_A_u()
 """(6, 3, 3): the slopes $A_j = \\partial A / \\partial u_j$ of the thesis' $A(u)$; pass it as
-`MovingPointEstimator(A=np.zeros((3, 3)), A_u=THESIS_A_U, ...)` for $A$ from the measured
+`MovingPointEstimator(A=np.zeros((3, 3)), A_u=MOVING_POINT_A_U, ...)` for $A$ from the measured
 camera velocities."""
 
 
@@ -187,7 +187,7 @@ class MovingPointEstimator(AbstractEstimator):
 
     **Time-varying A.** With `A_u` (6, 3, 3) or `K_u` (6, 3, 2) non-zero, $A$ and $K$
     follow the held camera velocity $u$ of each sample:
-    $A(u) = A + \\sum_j u_j A_{u,j}$ (`THESIS_A_U` gives the thesis' $A$ of the camera
+    $A(u) = A + \\sum_j u_j A_{u,j}$ (`MOVING_POINT_A_U` gives the thesis' $A$ of the camera
     velocities, $[[0, \\omega_z, -v_{cx}], [-\\omega_z, 0, -v_{cy}], [0, 0, 0]]$) and
     $K(u) = K + \\sum_j u_j K_{u,j}$; then $N(u) = M A(u) - K(u) C$, $L(u) = K(u)(I_2 + C E)
     - M A(u) E$, and (3.5) holds sample by sample ($E$, $M$ stay constant, so
@@ -260,7 +260,7 @@ class MovingPointEstimator(AbstractEstimator):
 
     def A_of(self, u):
         """$A(u) = A + \\sum_j u_j A_{u,j}$ (the thesis' $A$ of the camera velocities with
-        `A_u = THESIS_A_U`)."""
+        `A_u = MOVING_POINT_A_U`)."""
         return self.A + jnp.einsum("j,jab->ab", u, self.A_u)
 
     def K_of(self, u):

@@ -425,21 +425,6 @@ def _depth_from_feature_length(p_ref, A, n_star, known_length):
     return (length / jnp.where(gap_ok, gap, 1.0)) / (u @ m[0]), gap_ok
 
 
-def paper_eq56_matrix(m1_star, m1, alpha1, n_star, x_h, R_bar) -> Float[Array, "3 3"]:
-    """The matrix $\\mathrm{diag}(\\bar\\gamma_1 - \\bar\\gamma_2) + \\bar R$ that eq. (56) inverts.
-
-    Kept to document (and test) that it is singular; see `depth_from_known_length`.
-    $\\bar\\gamma_1 = \\mathrm{diag}(m_1^*)^{-1} n^{*T} m_1^* \\bar x_h$,
-    $\\bar\\gamma_2 = \\mathrm{diag}(m_1^*)^{-1} m_1/\\alpha_1$ (eq. (57)).
-    """
-    m1_star, m1, alpha1, n_star, x_h, R_bar = (
-        as_float(x) for x in (m1_star, m1, alpha1, n_star, x_h, R_bar)
-    )
-    g1 = (n_star @ m1_star) * x_h / m1_star
-    g2 = (m1 / alpha1) / m1_star
-    return jnp.diag(g1 - g2) + R_bar
-
-
 def diagonal_intersection(p: Float[ArrayLike, "4 2"]) -> Float[Array, "2"]:
     """The image of the intersection of the diagonals 1-3 and 2-4 of four plane points.
 

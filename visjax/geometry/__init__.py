@@ -1,5 +1,6 @@
 """Camera model, SO(3) and SL(3), homography estimation and decomposition: pure JAX functions."""
 
+from .._util import renamed as _renamed
 from ._calibration import (
     CameraFit as CameraFit,
     camera_matrix as camera_matrix,
@@ -53,7 +54,11 @@ from ._uncalibrated import (
     camera_from_parameters as camera_from_parameters,
     camera_parameters as camera_parameters,
     feature_in_camera as feature_in_camera,
-    intrinsics_eq4 as intrinsics_eq4,
+    intrinsics_from_camera as intrinsics_from_camera,
     known_feature_regressors as known_feature_regressors,
     unknown_feature_regressors as unknown_feature_regressors,
 )
+
+RENAMED = {"intrinsics_eq4": "intrinsics_from_camera"}
+"""The names of visjax 0.3 (old -> new): still given, with a `FutureWarning`."""
+__getattr__ = _renamed("visjax.geometry", RENAMED, globals())

@@ -34,7 +34,7 @@ from jaxtyping import Array, ArrayLike, Float
 from .._util import as_float, check_shape
 
 
-def intrinsics_eq4(
+def intrinsics_from_camera(
     f: float | ArrayLike,
     k_u: float | ArrayLike,
     k_v: float | ArrayLike,

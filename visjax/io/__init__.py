@@ -22,6 +22,7 @@ from ._formats import (
     StaticPointsData as StaticPointsData,
     VelocityData as VelocityData,
     coverage_line as coverage_line,
+    dropped_report as dropped_report,
     file_coverage as file_coverage,
     load_tracks_csv as load_tracks_csv,
     max_data_bytes as max_data_bytes,

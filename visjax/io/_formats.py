@@ -931,3 +931,20 @@ def file_coverage(problem: str, path) -> tuple[float, int] | None:
         return None
     data = cls.load(path)
     return float(data.dropped_fraction()), int(np.shape(data.pixels)[0])
+
+
+def dropped_report(problem: str, path) -> dict | None:
+    """What a command reports of a data file's missing frames (`file_coverage`):
+    `fraction`, `over` (above `MAX_DROPPED_FRACTION`), `result` (`DROPPED_RESULT`, the
+    code it makes of a successful run) and the printed `line`; `None` without a file
+    (`path` `None`) or for a problem whose format is its own."""
+    cover = None if path is None else file_coverage(problem, path)
+    if cover is None:
+        return None
+    fraction, frames = cover
+    return {
+        "fraction": fraction,
+        "over": fraction > MAX_DROPPED_FRACTION,
+        "result": DROPPED_RESULT,
+        "line": coverage_line(fraction, frames),
+    }

@@ -4,7 +4,8 @@ The papers' own scenarios are built from these in `visjax.papers`. A catalogue o
 scenes that are none of the papers' (the ones the tests, the benchmarks and the example data
 files use) is here too: `sinusoidal_plate_scene`, `spline_board_scene`,
 `sideways_camera_scene`, `circling_camera_scene`, `tilted_platform_scene`,
-`side_looking_platform_scene`, and their data-file forms (`*_record`).
+`side_looking_platform_scene`, and their data-file forms (`*_record`); and the scenes of
+the landmark problems, `point_depth_scene` and `homography_scene`.
 """
 
 from ._catalogue import (
@@ -24,6 +25,23 @@ from ._catalogue import (
     spline_board_scene as spline_board_scene,
     tilted_platform_record as tilted_platform_record,
     tilted_platform_scene as tilted_platform_scene,
+)
+from ._landmarks import (
+    HOMOGRAPHY_ANGULAR_VELOCITY as HOMOGRAPHY_ANGULAR_VELOCITY,
+    HOMOGRAPHY_CAMERA as HOMOGRAPHY_CAMERA,
+    HOMOGRAPHY_PLANE_DISTANCE as HOMOGRAPHY_PLANE_DISTANCE,
+    HOMOGRAPHY_PLANE_POINTS as HOMOGRAPHY_PLANE_POINTS,
+    HOMOGRAPHY_START as HOMOGRAPHY_START,
+    HOMOGRAPHY_START_ROTATION as HOMOGRAPHY_START_ROTATION,
+    HOMOGRAPHY_VELOCITY as HOMOGRAPHY_VELOCITY,
+    POINT_DEPTH_CAMERA as POINT_DEPTH_CAMERA,
+    POINT_DEPTH_POINTS as POINT_DEPTH_POINTS,
+    POINT_DEPTH_TWIST as POINT_DEPTH_TWIST,
+    HomographyScene as HomographyScene,
+    PointDepthScene as PointDepthScene,
+    homography_scene as homography_scene,
+    plane_group_velocity as plane_group_velocity,
+    point_depth_scene as point_depth_scene,
 )
 from ._moving_point import (
     MovingPointScene as MovingPointScene,

@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..geometry import intrinsics_eq4, so3_exp
+from ..geometry import intrinsics_from_camera, so3_exp
 from ._moving_point import MovingPointScene, moving_point_scene
 from ._rigs import add_pixel_noise, platform_camera_pixels
 from ._scene import (
@@ -376,10 +376,10 @@ def tilted_platform_scene(duration: float = 40.0, rate_hz: float = 1000.0) -> di
     true camera `A`, `R_c`, `x_c`, the `nominal` camera `(A, R_c, x_c)`, and `dt` (None:
     integrate at the samples).
     """
-    A = intrinsics_eq4(0.009, 1e5, 1e5, 91.5 * _DEG, 524.0, 371.0)
+    A = intrinsics_from_camera(0.009, 1e5, 1e5, 91.5 * _DEG, 524.0, 371.0)
     R_nominal, R_c, x_c = _tilted_mounting()
     nominal = (
-        intrinsics_eq4(0.0088, 1e5, 1e5, 90.0 * _DEG, 512.0, 384.0),
+        intrinsics_from_camera(0.0088, 1e5, 1e5, 90.0 * _DEG, 512.0, 384.0),
         R_nominal,
         jnp.array([0.04, -0.05, 0.14]),
     )
@@ -411,12 +411,12 @@ def side_looking_platform_scene(duration: float = 40.0, rate_hz: float = 100.0) 
     **Returns:** a dict with the keys of `tilted_platform_scene`: `name` ("side"), `p_s`
     (N, 4, 2), `p_c` (N, 8, 2), ..., and `dt` 1e-3.
     """
-    A = intrinsics_eq4(0.005, 1e5, 1e5, 90.0 * _DEG, 320.0, 240.0)
+    A = intrinsics_from_camera(0.005, 1e5, 1e5, 90.0 * _DEG, 320.0, 240.0)
     R_nominal = so3_exp(jnp.array([0.0, 90.0 * _DEG, 0.0]))  # optical axis along platform +x
     R_c = R_nominal @ so3_exp(jnp.array([3.0 * _DEG, 0.0, 0.0]))
     x_c = jnp.array([0.2, 0.0, 0.05])
     nominal = (
-        intrinsics_eq4(0.0048, 1e5, 1e5, 90.0 * _DEG, 330.0, 235.0),
+        intrinsics_from_camera(0.0048, 1e5, 1e5, 90.0 * _DEG, 330.0, 235.0),
         R_nominal,
         jnp.array([0.2, 0.0, 0.0]),
     )

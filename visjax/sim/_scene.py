@@ -29,7 +29,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, PRNGKeyArray
 
 from .._util import as_float, check_shape
-from ..geometry import intrinsics_eq4, so3_exp, so3_log
+from ..geometry import intrinsics_from_camera, so3_exp, so3_log
 from ._trajectory import Trajectory, integrate_twist
 
 
@@ -239,7 +239,7 @@ def intrinsics(
             f"fx={fx!r}, fy={fy!r}, skew_angle_deg={skew_angle_deg!r}."
         )
     # eq. (4) with f k_u = fx, f k_v = fy
-    return intrinsics_eq4(1.0, fx, fy, jnp.deg2rad(skew_angle_deg), cx, cy)
+    return intrinsics_from_camera(1.0, fx, fy, jnp.deg2rad(skew_angle_deg), cx, cy)
 
 
 def points_in_camera(

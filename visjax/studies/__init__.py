@@ -21,7 +21,9 @@ from ._parts import (
     clear_parts as clear_parts,
     find_parts as find_parts,
     merge_parts as merge_parts,
+    merge_sweeps as merge_sweeps,
     read_manifest as read_manifest,
+    saved_runs as saved_runs,
 )
 from ._plan import (
     MAX_RUNS as MAX_RUNS,
@@ -99,3 +101,4 @@ from ._sweep import (
     sweep as sweep,
 )
 from ._tune import TuneResult as TuneResult, objective as objective, tune as tune
+from ._verdict import Verdict as Verdict, judge_records as judge_records, verdict as verdict

@@ -246,6 +246,17 @@ def read_manifest(folder) -> dict:
     return m
 
 
+def saved_runs(folder) -> tuple[int, int]:
+    """`(done, total)`: the runs whose chunks a sweep's parts folder holds, of all its runs
+    (`(0, 0)` where there is no readable manifest): what an interrupted sweep kept."""
+    try:
+        m = read_manifest(folder)
+    except ValueError:
+        return 0, 0
+    n, chunk = m["n_runs"], m["chunk"]
+    return sum(min(chunk, n - c * chunk) for c in m["done"]), n
+
+
 def verify_part(folder, manifest: dict, chunk: int) -> str | None:
     """Whether `folder`'s part of chunk `chunk` is the one its sweep wrote. **Returns:**
     `None` for a verified part; otherwise why not: missing, its SHA-256 not the manifest's
@@ -349,3 +360,22 @@ def merge_parts(folders: Sequence) -> tuple:
     if len(table) != first["n_runs"] or table["run"].duplicated().any():
         raise PartsError(f"the parts hold {len(table)} rows for {first['n_runs']} runs.")
     return table, first
+
+
+def merge_sweeps(paths: Iterable) -> dict:
+    """The parts found in or under each of `paths` (`find_parts`), grouped by the sweep
+    they belong to (their manifests' identity) and merged (`merge_parts`): one sweep's
+    shards, or the sweeps of a problem's variants. **Returns:** tag -> `(table, manifest,
+    folders)`, the tag `None` for a single sweep, else the name of the folder holding its
+    parts (a variant's; made unique with the identity's start where two agree)."""
+    groups: dict[str, list] = {}
+    for folder in find_parts(paths):
+        groups.setdefault(read_manifest(folder)["identity"], []).append(folder)
+    out: dict = {}
+    for identity, members in groups.items():
+        table, manifest = merge_parts(members)
+        tag = Path(members[0]).parent.name if len(groups) > 1 else None
+        if tag is not None and tag in out:
+            tag = f"{tag}_{identity[:8]}"
+        out[tag] = (table, manifest, members)
+    return out

@@ -384,6 +384,10 @@ class SweepResult(Result):
     def __len__(self) -> int:
         return len(self._table)
 
+    def equals(self, other) -> bool:
+        """Whether the tables are equal (`other` a `SweepResult` or a DataFrame)."""
+        return self._table.equals(_as_frame(other))
+
     def __getattr__(self, name):
         if name.startswith("__") or name == "_table":
             raise AttributeError(name)

@@ -61,6 +61,7 @@ from ._scene import (
     X_F_STAR_EQ60 as X_F_STAR_EQ60,
     Section6Scenario as Section6Scenario,
     VelocityRun as VelocityRun,
+    eq56_matrix as eq56_matrix,
     section6_scenario as section6_scenario,
     section6_velocity as section6_velocity,
     window as window,

@@ -2,11 +2,12 @@
 (Chitrakaran, Dawson, Dixon, Chen, *Identification of a moving object's velocity with a
 fixed camera*), with the paper's estimator and its baselines."""
 
-from typing import Any, final
+from typing import final
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from ..._results import RESULTS, first_failure
 from ..._util import Frozen, Note, number_text
@@ -100,18 +101,18 @@ class VelocityProblem(AbstractProblem):
     data_parameters = ("noise_px",)
     grid = "K_scale=1e-3:1e1:9,rho_scale=1e-3:1e1:9"
 
-    ts: Any
-    clean: Any
-    A: Any
-    R_star: Any
-    s1: Any
-    truth: Any
-    K: Any
-    rho: Any
-    n_star: Any
-    z1_star: Any
-    reference_pixels: Any
-    noise_px: Any  # a data parameter (`at`): a sweep over noise levels is one `vmap`
+    ts: Float[ArrayLike, " n"]  # the sample times, s
+    clean: Float[ArrayLike, "n m 2"]  # the noise-free pixels of the m features
+    A: Float[ArrayLike, "3 3"]
+    R_star: Float[ArrayLike, "3 3"]
+    s1: Float[ArrayLike, " 3"]
+    truth: Float[ArrayLike, "n 6"] | None  # the object's velocity; None for a file without it
+    K: Float[ArrayLike, " 6"]
+    rho: Float[ArrayLike, " 6"]
+    n_star: Float[ArrayLike, " 3"]
+    z1_star: Float[ArrayLike, ""]
+    reference_pixels: Float[ArrayLike, "m 2"] | None
+    noise_px: Float[ArrayLike, ""]  # a data parameter (`at`): a noise sweep is one `vmap`
     window: tuple = eqx.field(static=True)
     bandwidths: tuple = eqx.field(static=True)
     max_jerk: float = eqx.field(static=True)

@@ -9,6 +9,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PRNGKeyArray
 
+from ..._util import as_float
 from ...sim import (
     CameraRig,
     Sampler,
@@ -131,3 +132,19 @@ class VelocityRun(eqx.Module):
 def window(duration: float) -> tuple[float, float]:
     """The paper's evaluation window, 5 to 10 s, shrunk into shorter runs (second half)."""
     return (min(5.0, duration / 2.0), min(10.0, duration))
+
+
+def eq56_matrix(m1_star, m1, alpha1, n_star, x_h, R_bar) -> Float[Array, "3 3"]:
+    """The matrix $\\mathrm{diag}(\\bar\\gamma_1 - \\bar\\gamma_2) + \\bar R$ that eq. (56) inverts.
+
+    Kept to document (and test) that it is singular; see
+    `visjax.estimators.depth_from_known_length`.
+    $\\bar\\gamma_1 = \\mathrm{diag}(m_1^*)^{-1} n^{*T} m_1^* \\bar x_h$,
+    $\\bar\\gamma_2 = \\mathrm{diag}(m_1^*)^{-1} m_1/\\alpha_1$ (eq. (57)).
+    """
+    m1_star, m1, alpha1, n_star, x_h, R_bar = (
+        as_float(x) for x in (m1_star, m1, alpha1, n_star, x_h, R_bar)
+    )
+    g1 = (n_star @ m1_star) * x_h / m1_star
+    g2 = (m1 / alpha1) / m1_star
+    return jnp.diag(g1 - g2) + R_bar

@@ -2,11 +2,12 @@
 whose velocity is measured (Jang's thesis), with the unknown input observer and its
 baselines."""
 
-from typing import Any, final
+from typing import final
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float, Int
 
 from ..._util import Note, number_text
 from ...baselines import moving_point_ekf, triangulate_point
@@ -55,16 +56,16 @@ class MovingPointProblem(AbstractProblem):
     data_parameters = ("noise_px",)
     grid = "K_scale=0.1:10:7,Y_scale=0.1:10:7"
 
-    ts: Any  # the observer's samples (the frames held at 1 kHz for a scene)
-    frame_index: Any  # the frame held at each of `ts`
-    frame_ts: Any
-    frame_pixels: Any  # noise-free
-    frame_velocities: Any
-    Kc: Any
-    truth_ts: Any
-    truth: Any  # the true position in the observer's units (cm for a thesis set), or None
-    observer: Any  # the reference observer (the published or designed gains)
-    noise_px: Any  # a data parameter (`at`): a sweep over noise levels is one `vmap`
+    ts: Float[ArrayLike, " n"]  # the observer's samples (the frames held at 1 kHz for a scene)
+    frame_index: Int[ArrayLike, " n"]  # the frame held at each of `ts`
+    frame_ts: Float[ArrayLike, " f"]
+    frame_pixels: Float[ArrayLike, "f 2"]  # noise-free
+    frame_velocities: Float[ArrayLike, "f 6"]
+    Kc: Float[ArrayLike, "3 3"]
+    truth_ts: Float[ArrayLike, " t"]
+    truth: Float[ArrayLike, "t 3"] | None  # the position in the observer's units (cm for a set)
+    observer: MovingPointEstimator  # the reference observer (the published or designed gains)
+    noise_px: Float[ArrayLike, ""]  # a data parameter (`at`): a noise sweep is one `vmap`
     to_m: float = eqx.field(static=True)
     moving: bool = eqx.field(static=True)
     window_s: tuple = eqx.field(static=True)
@@ -388,7 +389,7 @@ def moving_point_observer_for_data(data):
     camera velocities at the frame times.
 
     The camera velocities are interpolated (linearly) to the frame times; the observer's
-    $A(u)$ is the thesis' matrix of the camera velocities (`THESIS_A_U`), and its gains
+    $A(u)$ is the thesis' matrix of the camera velocities (`MOVING_POINT_A_U`), and its gains
     are designed by `visjax.design.design_uio_for_motion` for the velocity range of the
     file (10% margin) and the measured velocities (up to the first 250 frames), with
     $D$ the file's unknown-input direction. The design takes $\\bar f = 0$ (Lipschitz

@@ -9,6 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from ..._util import Frozen, Note, number_text
 from ...baselines import bundle_adjustment, cauchy, static_points_ekf
@@ -88,17 +89,17 @@ class StaticPointsProblem(AbstractProblem):
     data_parameters = ("noise_px",)
     grid = "alpha_scale=0.1:10:5,gamma_scale=0.1:10:5"
 
-    ts: Any
-    R_b: Any
-    x_b: Any
-    omega_c: Any
-    clean: Any  # the noise-free pixels, the known features first
-    truth: Any  # the unknown features' world positions, or None
-    A_nominal: Any
-    R_c_nominal: Any
-    x_c_nominal: Any
+    ts: Float[ArrayLike, " n"]
+    R_b: Float[ArrayLike, "n 3 3"]
+    x_b: Float[ArrayLike, "n 3"]
+    omega_c: Float[ArrayLike, "k 3"]
+    clean: Float[ArrayLike, "n m 2"]  # the noise-free pixels, the known features first
+    truth: Float[ArrayLike, "u 3"] | None  # the unknown features' world positions, or None
+    A_nominal: Float[ArrayLike, "3 3"]
+    R_c_nominal: Float[ArrayLike, "3 3"]
+    x_c_nominal: Float[ArrayLike, " 3"]
     n_known: int = eqx.field(static=True)
-    noise_px: Any  # a data parameter (`at`): a sweep over noise levels is one `vmap`
+    noise_px: Float[ArrayLike, ""]  # a data parameter (`at`): a noise sweep is one `vmap`
     dt: float | None = eqx.field(static=True)
     window_frames: int = eqx.field(static=True)
     every_frames: int = eqx.field(static=True)

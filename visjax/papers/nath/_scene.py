@@ -15,7 +15,7 @@ from ...estimators import (
     Stream,
     static_points_stream,
 )
-from ...geometry import camera_parameters, intrinsics_eq4, so3_exp
+from ...geometry import camera_parameters, intrinsics_from_camera, so3_exp
 from ...sim import (
     CameraRig,
     Trajectory,
@@ -68,7 +68,7 @@ def scenario(
 # the scene's arrays, compiled once per length (not one compiled operation per line)
 @functools.partial(jax.jit, static_argnums=1)
 def _scenario(ts, exciting):
-    A = intrinsics_eq4(0.008, 1e5, 1e5, jnp.deg2rad(88.0), 320.0, 240.0)
+    A = intrinsics_from_camera(0.008, 1e5, 1e5, jnp.deg2rad(88.0), 320.0, 240.0)
     R_c = so3_exp(jnp.deg2rad(5.0) * jnp.array([0.6, -0.8, 0.0]))
     x_c = jnp.array([0.05, -0.03, 0.10])
     omega_c = jnp.array(
@@ -125,7 +125,7 @@ def nominal_camera() -> tuple[Float[Array, "3 3"], Float[Array, "3 3"], Float[Ar
 
     **Returns:** `(A_nominal, R_c_nominal, x_c_nominal)`.
     """
-    A = intrinsics_eq4(0.008 * 1.1, 1e5, 1e5, jnp.deg2rad(90.0), 340.0, 225.0)
+    A = intrinsics_from_camera(0.008 * 1.1, 1e5, 1e5, jnp.deg2rad(90.0), 340.0, 225.0)
     R_c = so3_exp(jnp.deg2rad(3.0) * jnp.array([0.0, 0.0, 1.0])) @ so3_exp(
         jnp.deg2rad(5.0) * jnp.array([0.6, -0.8, 0.0])
     )
