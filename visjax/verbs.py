@@ -308,27 +308,21 @@ def compare_command(
         worse, judged = studies.judge_records(p, records)
         if judged is not None:
             body["quality"] = judged
-        # the problem's predicted spread (`uncertainty`: keys `<metric>_std`), if any
-        std_key = next((k for k in records[0] if k.endswith("_std")), None)
+        rows = records.medians(p.metric)
+        std_key = rows[0].get("std_key") if rows else None
         std_head = f"{'predicted ' + std_key:>28}" if std_key else ""
         worse_head = f"{'worse than trivial':>20}" if worse is not None else ""
         print(
             f"{'method':<14}{'failed':>8}{p.metric + ' (median)':>24}{std_head}"
             f"{'latency/sample (s)':>20}{worse_head}"
         )
-        for m in p.methods:
-            rows = [r for r in records if r["method"] == m]
-            good = [r[p.metric] for r in rows if r["result"] == "successful" and r[p.metric]]
-            acc = f"{np.median(good):.4g}" if good else "-"
-            lat = float(np.median([r["latency_s_per_sample"] for r in rows]))
-            failed = sum(r["result"] != "successful" for r in rows)
-            std = ""
-            if std_key:
-                worst = [_worst(r[std_key]) for r in rows]
-                worst = [w for w in worst if w is not None]
-                std = f"{np.median(worst):>28.4g}" if worst else f"{'-':>28}"
-            bad = "" if worse is None else f"{worse[m]:>20}"
-            print(f"{m:<14}{failed:>8}{acc:>24}{std}{lat:>20.3g}{bad}")
+        for r in rows:
+            acc = "-" if r["metric"] is None else f"{r['metric']:.4g}"
+            std = (
+                "" if not std_key else f"{'-' if r['std'] is None else format(r['std'], '.4g'):>28}"
+            )
+            bad = "" if worse is None else f"{worse[r['method']]:>20}"
+            print(f"{r['method']:<14}{r['failed']:>8}{acc:>24}{std}{r['latency']:>20.3g}{bad}")
         if worse is not None and any(worse.values()):
             q = body["quality"]
             print(
@@ -359,13 +353,6 @@ def compare_command(
     if list(results) == [None]:
         return results[None]
     return _result(results, settings, seed, started, out)
-
-
-def _worst(value):
-    """The largest finite number of a JSON value (a number, a nested list, `None`)."""
-    flat = np.asarray(value if value is not None else np.nan, dtype=object).ravel()
-    finite = [float(v) for v in flat if v is not None and np.isfinite(float(v))]
-    return max(finite) if finite else None
 
 
 def _mesh(shard: bool):

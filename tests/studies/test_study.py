@@ -65,6 +65,9 @@ def test_a_function_problem_agrees_with_the_problem_in_every_study():
     records = studies.compare(FN, keys[:2], params={"gain": 2.0}, study=studies.Study(repeats=1))
     assert isinstance(records, studies.Comparison) and len(records) == 2
     np.testing.assert_allclose(records.to_pandas()["error"], expected[:2], rtol=1e-12)
+    (row,) = records.medians("error")  # one method: its median over the keys
+    assert row["method"] == "function" and row["failed"] == 0 and "std_key" not in row
+    assert row["metric"] == pytest.approx(float(np.median(expected[:2])), rel=1e-12)
 
     tuned = studies.tune(FN, {"gain": 1.0}, keys, steps=5)
     assert tuned.loss <= tuned.loss0 and list(tuned.to_pandas()["step"]) == list(range(6))

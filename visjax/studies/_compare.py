@@ -23,12 +23,42 @@ class StudyTooLong(ValueError):
 
 class Comparison(Result, list):
     """What `compare` returns: the records (a list of dicts, one per method and key) and
-    `to_pandas()`, them as a table."""
+    `to_pandas()`, them as a table; `medians(metric)`, one row per method."""
 
     def to_pandas(self):
         import pandas as pd
 
         return pd.DataFrame(list(self))
+
+    def medians(self, metric: str) -> list[dict]:
+        """Per method, in the records' order: `method`, `failed` (runs that did not
+        succeed), `metric` (the median of `metric` over the successful runs; `None` if
+        none), `latency` (the median `latency_s_per_sample`), and where the records carry
+        a predicted spread (a key `<name>_std`, `AbstractProblem.uncertainty`) `std_key`
+        and `std`, the median over the runs of its largest finite entry (`None` if none)."""
+        std_key = next((k for k in (self[0] if self else {}) if k.endswith("_std")), None)
+        out = []
+        for m in dict.fromkeys(r["method"] for r in self):
+            rows = [r for r in self if r["method"] == m]
+            good = [r[metric] for r in rows if r["result"] == "successful" and r[metric]]
+            row = {
+                "method": m,
+                "failed": sum(r["result"] != "successful" for r in rows),
+                "metric": float(np.median(good)) if good else None,
+                "latency": float(np.median([r["latency_s_per_sample"] for r in rows])),
+            }
+            if std_key is not None:
+                worst = [w for w in (_largest(r[std_key]) for r in rows) if w is not None]
+                row.update(std_key=std_key, std=float(np.median(worst)) if worst else None)
+            out.append(row)
+        return out
+
+
+def _largest(value):
+    """The largest finite number of a JSON value (a number, a nested list, `None`)."""
+    flat = np.asarray(value if value is not None else np.nan, dtype=object).ravel()
+    finite = [float(v) for v in flat if v is not None and np.isfinite(float(v))]
+    return max(finite) if finite else None
 
 
 def compare(
