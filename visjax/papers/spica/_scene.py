@@ -11,7 +11,10 @@ from ...sim import (
 # The problem `point_depth`: the inverse depth of static points seen by a camera moving with
 # a known velocity (scene of its own: not the paper's motion)
 
-POINTS, TWIST, CAMERA = POINT_DEPTH_POINTS, POINT_DEPTH_TWIST, POINT_DEPTH_CAMERA  # the scene's
+# the scene's constants, under the names of version 3 (`visjax.sim.POINT_DEPTH_*`)
+POINTS = POINT_DEPTH_POINTS
+TWIST = POINT_DEPTH_TWIST
+CAMERA = POINT_DEPTH_CAMERA
 
 # the robust baselines' settings (`robust=True`; a stated choice, not tuned to any result, as
 # the static-points problem's): the Cauchy loss at 1 px for the least-squares triangulation
