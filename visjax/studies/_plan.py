@@ -43,9 +43,9 @@ class Plan:
 
     kind: str
     runs: int
-    memory: int
+    memory: int | float
     memory_of: str
-    available: float | None
+    available: int | float | None
 
     def check(self, where: str) -> None:
         check_run_count(self.kind, self.runs, where)

@@ -444,7 +444,9 @@ class _FunctionRun(eqx.Module):
         return self.problem.metrics(self.method, solution)
 
 
-def runner(problem: AbstractProblem, method: str | None = None, fixed=None, check=True) -> _Run:
+def runner(
+    problem: AbstractProblem, method: str | None = None, fixed=None, check=True
+) -> "_Run | _FunctionRun":
     """The run of one method of a problem (`run(point, key) -> solution`,
     `run.metrics(solution)`): the parameters not in `point` from `fixed`, then the
     defaults (a `FunctionProblem`: the point as it is, `fixed` when it is empty).
