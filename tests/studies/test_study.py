@@ -91,6 +91,9 @@ def test_version3_forms_warn_and_give_the_same_numbers():
     now = studies.compare(p, np.arange(1, 3), study=studies.Study(repeats=1))
     assert [r["seed"] for r in records] == [r["seed"] for r in now] == [1, 1, 2, 2]
     assert [r["error"] for r in records] == [r["error"] for r in now]
+    with pytest.warns(FutureWarning, match="compare"):  # version 3's defaults: seeds 0-3
+        default = studies.compare(p, first_seed=1, study=studies.Study(repeats=1))
+    assert sorted({r["seed"] for r in default}) == [1, 2, 3, 4]
     with pytest.warns(FutureWarning, match="FunctionProblem"):
         old_tune = studies.tune(weighted, {"gain": 1.0}, lambda s: error(s)["error"], keys, steps=3)
     new_tune = studies.tune(FN, {"gain": 1.0}, keys, steps=3)

@@ -101,7 +101,8 @@ def compare(
     `compile_s` (the first call, compilation included: the first key only, else `None`)
     and the metrics.
     """
-    if not isinstance(problem, AbstractProblem) or old or "seeds" in legacy:
+    version3 = {"seeds", "first_seed", "updates"} & set(legacy)
+    if not isinstance(problem, AbstractProblem) or old or version3 or keys is None:
         return _version3(problem, keys, *old, params=params, study=study, **legacy)
     study = study_of(study, "compare", **legacy)
     typed, seed_values = seed_keys(keys, "compare")
