@@ -168,6 +168,20 @@ def test_invalid_grid_values_are_refused(grid, says, no_study, capsys):
     assert says in err and "gain" in err
 
 
+def test_sweep_options_that_exclude_each_other_are_usage_errors(no_study, capsys, tmp_path):
+    """`verbs.Request` refuses what cannot run before any work: a sweep's parts need
+    `--out`; `--resume` and `--force` exclude each other; tune follows one path, no job
+    slice."""
+    out = ["--out", str(tmp_path / "o")]
+    err = _refused([*TOY, "sweep", "slow-toy", "--grid", "gain=1/2", "--resume"], capsys)
+    assert "need --out" in err
+    err = _refused([*TOY, "sweep", "slow-toy", "--resume", "--force", *out], capsys)
+    assert "exclude each other" in err
+    err = _refused([*TOY, "tune", "slow-toy", "--shard", "0/2", *out], capsys)
+    assert "--shard i/N is for sweep" in err
+    assert not (tmp_path / "o").exists()
+
+
 # 3. studies sized before they start: the run count, then the memory
 
 
@@ -271,9 +285,12 @@ def test_a_file_with_most_frames_missing_a_feature_is_not_successful(tmp_path, c
     assert summary["dropped_fraction"] == 0.75
     assert summary["result"] == "too_many_dropped_frames" != "successful"
     # the study verbs read the same fraction from the file
-    dropped = verbs._dropped("velocity", path)
+    dropped = verbs._dropped(verbs.Request("run", "velocity", data=str(path)))
     assert dropped["fraction"] == 0.75 and dropped["over"]
-    assert verbs._dropped("slow-toy", path) is None  # a format of its own: not reported
+    import tests.studies.slow_toy  # noqa: F401  (registers slow-toy)
+
+    toy = verbs.Request("run", "slow-toy", data=str(path))
+    assert verbs._dropped(toy) is None  # a format of its own: not reported
 
 
 def test_variant_names_never_write_outside_out(tmp_path, capsys):

@@ -252,3 +252,18 @@ def test_every_registered_problem_is_final():
         classes = typing.get_args(returned) or (returned,)
         for cls in classes:
             assert getattr(cls, "__final__", False), (name, cls.__name__)
+
+
+LINE_LIMITS = {"cli.py": 300, "verbs.py": 350}
+"""Issue 45 and `DESIGN.md`: the command line parses and dispatches, the commands call the
+studies, print and write; what either grows past its limit belongs in `studies` (or in
+`_options.py`, the option vocabulary)."""
+
+
+def test_the_command_line_and_the_commands_stay_small():
+    long = {
+        name: lines
+        for name, limit in LINE_LIMITS.items()
+        if (lines := len((PACKAGE / name).read_text().splitlines())) > limit
+    }
+    assert not long, long

@@ -423,9 +423,12 @@ def test_unit_in_parentheses_becomes_brackets():
         "worst-axis RMS, last half [m/s, rad/s]"
     )
     assert plots._unit_label("error [mm]") == "error [mm]"
-    assert plots._formats("PDF") == ("pdf",)
+    assert plots.figure_formats("PDF") == ("pdf",)
+    assert plots.figure_formats(" png, PDF,png") == ("png", "pdf")  # the command line's text
     with pytest.raises(ValueError, match="empty"):
-        plots._formats(())
+        plots.figure_formats(())
+    with pytest.raises(ValueError, match="unknown figure format 'jpeg'"):
+        plots.figure_formats("png,jpeg")
 
 
 def test_comparison_errors_need_a_label_with_ts():

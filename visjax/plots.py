@@ -99,15 +99,17 @@ DOF_LABELS = (
 # helpers
 
 
-def _formats(formats) -> tuple:
-    """The requested formats, checked: a ValueError naming the first one not allowed."""
+def figure_formats(formats) -> tuple:
+    """The requested figure formats (names, or one comma-separated string: `"png,pdf"`),
+    lower-case, each once. **Raises:** `ValueError` naming the first one not in `FORMATS`,
+    or for none."""
     if isinstance(formats, str):
-        formats = (formats,)
+        formats = [f.strip() for f in formats.split(",") if f.strip()]
     out = []
     for fmt in formats:
         name = str(fmt).lower().lstrip(".")
         if name not in FORMATS:
-            raise ValueError(f"unknown figure format {fmt!r}; choose from {list(FORMATS)}")
+            raise ValueError(f"unknown figure format {fmt!r}; choose from {', '.join(FORMATS)}")
         if name not in out:
             out.append(name)
     if not out:
@@ -317,7 +319,7 @@ def plot_velocity(
     median and the 10-90 % band over seeds; the truth may then be (N, 6) or (S, N, 6));
     `max_points` samples per line at most (decimated); `title`, `path`, `formats` as in the
     module's docstring. **Returns:** the `Figure`."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     ts = np.asarray(ts, dtype=float)
     est, seeds = _stacked(estimate, 2, "estimate")
     step = _stride(len(ts), max_points)
@@ -375,7 +377,7 @@ def plot_moving_point(
     (N, 3), or (S, N, 3) over S seeds (then the median and the 10-90 % band over seeds; the
     truth may then be (N, 3) or (S, N, 3)); `max_points`, `title`, `path`, `formats` as in
     the module's docstring. **Returns:** the `Figure`."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     ts = np.asarray(ts, dtype=float)
     est, seeds = _stacked(estimate, 2, "estimate")
     step = _stride(len(ts), max_points)
@@ -420,7 +422,7 @@ def plot_camera_velocity(ts, v_c, *, title=None, path=None, formats=("png",), ma
     linear first (as `camera_velocity` of the structure data format); `max_points`, `title`,
     `path`, `formats` as in the module's docstring. **Returns:** the `Figure`
     (single column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     ts = np.asarray(ts, dtype=float)
     v = np.asarray(v_c, dtype=float)
     if v.ndim != 2 or v.shape[1] != 6 or v.shape[0] != ts.shape[0]:
@@ -457,7 +459,7 @@ def plot_testbed(run, *, title=None, path=None, max_points=2000, formats=("png",
     `velocity_measured`, `ts`, `position`, `estimate`, `estimate_ideal`); `max_points`,
     `title`, `path`, `formats` as in the module's docstring. **Returns:** the `Figure`
     (double column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     ft = np.asarray(run.frame_ts, dtype=float)
     ts = np.asarray(run.ts, dtype=float)
     est = np.asarray(run.estimate, dtype=float)
@@ -532,7 +534,7 @@ def plot_static_points(run, *, title=None, path=None, max_points=2000, formats=(
     one whose arrays have a leading seed axis (S, ...) (`omega_true` (n, 3) or (S, n, 3)):
     then the median and the 10-90 % band over seeds. `max_points`, `title`, `path`, `formats`
     as in the module's docstring. **Returns:** the `Figure` (double column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     ts = np.asarray(run.ts, dtype=float)
     if ts.ndim == 2:  # stacked runs: the same time grid for every seed
         ts = ts[0]
@@ -594,7 +596,7 @@ def plot_transient(ts, measured: dict, ideal, *, title=None, path=None, formats=
 
     **Arguments:** `ts` (N,) [s]; `measured` label -> (N,); `ideal` (N,); `title`, `path`,
     `formats` as in the module's docstring. **Returns:** the `Figure` (double column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     ts = np.asarray(ts, dtype=float)
     ideal = np.asarray(ideal, dtype=float)
     plt = _pyplot(path)
@@ -629,7 +631,7 @@ def plot_feature_estimates(
     (then the median and the 10-90 % band over seeds); `truth` (n, 3), (S, n, 3) or `None`;
     `max_points`, `title`, `path`, `formats` as in the module's docstring. **Returns:** the
     `Figure` (double column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     ts = np.asarray(ts, dtype=float)
     est, seeds = _stacked(estimate, 3, "estimate")
     step = _stride(len(ts), max_points)
@@ -689,7 +691,7 @@ def plot_geometry(scenes, ours, errors, *, title=None, path=None, formats=("png"
     `R_bar_deg` and `alpha_rel` per scene (`papers.chitrakaran.reconstruction_errors`);
     `title`, `path`, `formats` as in the module's docstring. **Returns:** the `Figure`
     (double column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     p_ref = np.asarray(scenes.p_ref[0], float)
     p_cur = np.asarray(scenes.p_cur[0], float)
     A = np.asarray(scenes.A[0], float)
@@ -769,7 +771,7 @@ def plot_comparison(
     the last axis when it has d components; `error_label` its axis label, with its unit, e.g.
     `"position error [m]"` (required with `errors`); `title`, `path`, `formats` as in the
     module's docstring. **Returns:** the `Figure` (double column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     series = {}
     if errors is not None:
         if ts is None or error_label is None:
@@ -871,7 +873,7 @@ def plot_sweep(
     trailing parentheses, shown in brackets); `title`, `path`, `formats` as in the module's
     docstring; `units` name -> the parameter's unit (default: dimensionless, `-`).
     **Returns:** the `Figure` (single column for one parameter, else double)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     units = dict(units or {})
     plt = _pyplot(path)
     mean = summary[f"{metric}_mean"].to_numpy(float)
@@ -943,7 +945,7 @@ def plot_sweep(
 def save_figure(fig, path, formats=("png",)):
     """Write a figure made elsewhere (a problem's `figure`) in every format of `formats`
     (the suffix of `path` is replaced by each), then close it."""
-    return _finish(fig, None, path, _formats(formats))
+    return _finish(fig, None, path, figure_formats(formats))
 
 
 def plot_tune_history(history, *, label=None, title=None, path=None, formats=("png",)):
@@ -951,7 +953,7 @@ def plot_tune_history(history, *, label=None, title=None, path=None, formats=("p
     axis label, with its unit (in brackets, or in trailing parentheses, shown in brackets;
     default `"training loss [-]"`); `title`, `path`, `formats` as in the module's docstring.
     **Returns:** the `Figure` (single column)."""
-    formats = _formats(formats)
+    formats = figure_formats(formats)
     plt = _pyplot(path)
     with _style():
         fig, axes = _subplots(plt, 1, 1, SINGLE_COLUMN, 2.4)

@@ -24,15 +24,18 @@ from ._parts import (
     merge_sweeps as merge_sweeps,
     read_manifest as read_manifest,
     saved_runs as saved_runs,
+    sweep_parts as sweep_parts,
 )
 from ._plan import (
     MAX_RUNS as MAX_RUNS,
     Plan as Plan,
-    Refused as Refused,
     Selection as Selection,
     check_grid as check_grid,
+    check_grid_text as check_grid_text,
     check_run_count as check_run_count,
+    check_study as check_study,
     grid_size as grid_size,
+    merge_summary as merge_summary,
     plan as plan,
     study_runs as study_runs,
     sweep_then_hold_out as sweep_then_hold_out,
@@ -61,6 +64,7 @@ from ._problem import (
 )
 from ._registry import (
     UserCodeError as UserCodeError,
+    build_problems as build_problems,
     load_module as load_module,
     problem as problem,
     problem_names as problem_names,
@@ -80,10 +84,13 @@ from ._reproductions import (
 )
 from ._study import (
     Interrupted as Interrupted,
+    Refused as Refused,
     Result as Result,
     Study as Study,
+    device_mesh as device_mesh,
     handling_signals as handling_signals,
     interruptible as interruptible,
+    parse_shard as parse_shard,
 )
 from ._sweep import (
     MemoryLimitError as MemoryLimitError,

@@ -22,6 +22,8 @@ import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from ..io import user_path, written_directly
+
 MANIFEST = "manifest.json"
 _VERSION = 2  # 2: each part's checksum in the manifest, its identity in its metadata
 _META = b"visjax.part"  # a part's Parquet key-value metadata: identity, chunk, runs
@@ -194,6 +196,31 @@ def clear_parts(folder) -> None:
             path.unlink()
     with contextlib.suppress(OSError):
         folder.rmdir()
+
+
+def sweep_parts(folder, shard=None, *, resume=False, force=False) -> Path:
+    """Where a sweep writing into the output folder `folder` keeps its parts: `parts/`, or
+    `parts-i-of-N/` for the slice `shard=(i, N)`, in the folder the user asked for (never a
+    staging one, `visjax.io.staged_output`: an interrupted sweep keeps them), recorded as
+    the command's own entry of it. `force` clears them (a fresh start). **Raises:**
+    `ValueError` when `folder` holds a finished sweep (its `summary.json`) and neither
+    `resume` nor `force` is given."""
+    final = Path(user_path(str(folder)))
+    parts = final / ("parts" if shard is None else f"parts-{shard[0]}-of-{shard[1]}")
+    written_directly(parts)  # the command's own entry of --out (its manifest)
+    if force:
+        clear_parts(parts)  # only what a sweep wrote there; a link is never followed
+        return parts
+    try:
+        kind = None if resume else json.loads((final / "summary.json").read_text()).get("kind")
+    except (ValueError, OSError):
+        kind = None
+    if kind == "sweep":
+        raise ValueError(
+            f"{final} holds a finished sweep: --force to replace it, or --resume to rebuild "
+            "its table from its parts"
+        )
+    return parts
 
 
 def _sha256(path: Path) -> str:

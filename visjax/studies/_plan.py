@@ -14,7 +14,7 @@ import jax
 import numpy as np
 
 from ._problem import AbstractProblem, check_values
-from ._study import Result, Study
+from ._study import Refused, Result, Study
 from ._sweep import SweepResult, available_memory, best, held_out, parse_grid, summarise, sweep
 from ._tune import TuneResult, tune
 
@@ -27,11 +27,6 @@ RECORD_BYTES = 1024
 """Memory per record of `compare` (a dict of a dozen numbers and names), bytes."""
 
 KINDS = ("compare", "sweep", "tune")
-
-
-class Refused(ValueError):
-    """A study refused before it runs (an unknown or invalid grid parameter, more than
-    `MAX_RUNS` runs, more memory than is available): one line."""
 
 
 @dataclass(frozen=True)
@@ -92,6 +87,50 @@ def grid_size(spec: str) -> int | None:
             return None
         size *= max(n, 0)
     return size
+
+
+def check_grid_text(spec: str) -> str:
+    """A `--grid` spec that parses (`parse_grid`), of at most `MAX_RUNS` points (counted
+    from the text first: nothing that large is built), every value finite; its names and
+    signs need the problem (`check_grid`). **Raises:** `Refused`, one line."""
+    size = grid_size(spec)
+    if size is not None and size > MAX_RUNS:
+        raise Refused(
+            f"the grid {spec!r} has {size:.3g} points, more than one command runs ({MAX_RUNS:.0e})"
+        )
+    try:
+        points = parse_grid(spec)
+    except ValueError as e:
+        raise Refused(str(e)) from None
+    for name, values in points.items():
+        if not all(math.isfinite(v) for v in values):
+            raise Refused(f"grid axis {name!r} has a value that is not finite in {spec!r}")
+    return spec
+
+
+def check_study(
+    kind: str, name: str, build, *, spec=None, seeds: int = 1, study=None, steps=0, variants=1
+) -> list:
+    """A study's size before any compile, what the command line checks: the run count (at
+    most `MAX_RUNS`; first from the grid's text `spec` and the `variants` count, before
+    anything is built), then on the problems `build()` returns (`[(tag, problem)]`, built
+    once) the grid (`check_grid`: `spec`, or each problem's default) and `plan` (the runs
+    again, a lower bound of the memory against `available_memory()`, of the job's slice
+    with `study.shard`). **Raises:** `Refused`, one line. **Returns:** the built problems."""
+    count = 1 if spec is None else grid_size(spec)
+    if count is not None:
+        what = f"{count} grid points x {seeds} seeds" if spec else f"{seeds} seeds"
+        what += f" and {steps} steps" if kind == "tune" else ""
+        check_run_count(kind, variants * study_runs(kind, count, seeds, steps), what)
+    built, total = build(), 0
+    for tag, p in built:
+        where = name if tag is None else f"{name} [{tag}]"
+        points = None if kind == "compare" else check_grid(p, spec or p.grid, where)
+        found = plan(p, points, seeds, study, kind=kind, steps=steps)
+        found.check(where)
+        total += found.runs
+    check_run_count(kind, total, f"{len(built)} problem(s), their grids and {seeds} seeds")
+    return built
 
 
 def input_bytes(problem: AbstractProblem) -> int:
@@ -191,6 +230,35 @@ class Selection(Result):
         ]
         return pd.DataFrame(rows)
 
+    def report(self, problem: AbstractProblem) -> dict:
+        """What the selection found, as JSON (the summaries of `visjax sweep` and `visjax
+        tune`): the metric; the held-out points (`best`: the tuned one after a tuning;
+        `paper`: the defaults; `sweep_best` after a tuning), each `{"params", "metric"}`;
+        the gains; a sweep's run counts or a tuning's training loss and held-out failures;
+        the problem's checks of the chosen point (`AbstractProblem.checks`)."""
+        point = {k: {"params": v["params"], "metric": v["metric"]} for k, v in self.held.items()}
+        out = {
+            "metric": problem.metric, "paper": point["paper"], "problem": problem.title,
+            "problem_settings": problem.settings(), "paper_gains": problem.gains({}),
+        }  # fmt: skip
+        if self.tuned is None:
+            chosen = self.best["params"]
+            failed = int((self.sweep["result"] != "successful").sum())
+            return out | {
+                "best": point["best"], "best_training_metric": self.best["metric"],
+                "best_gains": problem.gains(chosen), "failed_runs": failed,
+                "runs": len(self.sweep), **problem.checks(chosen),
+            }  # fmt: skip
+        chosen = self.tuned.params
+        return out | {
+            "best": point["tuned"], "sweep_best": point["sweep best"],
+            "improvement_over_paper": point["paper"]["metric"] / point["tuned"]["metric"],
+            "training_loss": {"sweep_best": self.tuned.loss0, "tuned": self.tuned.loss},
+            "tuned_gains": problem.gains(chosen),
+            "held_out_failed_runs": {k: v["failed"] for k, v in self.held.items()},
+            **problem.checks(chosen),
+        }  # fmt: skip
+
 
 def defaults_of(problem: AbstractProblem, names) -> dict:
     """The defaults (the paper's values) of the named parameters."""
@@ -202,9 +270,11 @@ def sweep_then_hold_out(
 ) -> Selection | SweepResult:
     """A sweep of `points` over `keys`, its best point by the mean headline metric, and
     the best point and the defaults re-measured on `held_keys` (`held_out`): the honest
-    figure of a chosen point. With `study.shard` (a job's slice), only the slice's
-    `SweepResult` (the best point needs every run)."""
+    figure of a chosen point; `points` may be a `parse_grid` spec (checked: `check_grid`).
+    With `study.shard` (a job's slice), only the slice's `SweepResult` (the best point
+    needs every run)."""
     study = Study() if study is None else study
+    points = check_grid(problem, points, problem.title) if isinstance(points, str) else points
     table = sweep(problem, points, keys, study=study)
     if study.shard is not None:
         return table
@@ -228,10 +298,12 @@ def sweep_then_tune(
     parameters, `optimiser` for `steps` steps) from its best point on the same keys; the
     tuned point, the sweep's best and the defaults re-measured on `held_keys`. A gradient
     refines the basin a global sweep found (the sign-based and resetting laws make the
-    loss piecewise smooth); it does not replace the sweep."""
+    loss piecewise smooth); it does not replace the sweep. `points` as in
+    `sweep_then_hold_out`."""
     study = Study() if study is None else study
     if study.shard is not None:
         raise ValueError("a tuning follows one path: it needs every run of its sweep, not a shard")
+    points = check_grid(problem, points, problem.title) if isinstance(points, str) else points
     table = sweep(problem, points, keys, study=study)
     chosen = best(table, problem.metric)
     tuned = tune(
@@ -245,3 +317,22 @@ def sweep_then_tune(
     }
     held = held_out(problem, named, held_keys, study=study)
     return Selection(table, summarise(table, problem.metric), chosen, held, tuned)
+
+
+def merge_summary(table, manifest: Mapping, members) -> dict:
+    """What `visjax merge` says of one merged sweep (`merge_sweeps`' `(table, manifest,
+    members)`): its runs, chunks, source folders and failed runs, its metric (when the
+    manifest names it) and, when any run succeeded, its best point by the mean metric
+    (`best`; `None` where no point has a finite mean)."""
+    metric = manifest.get("info", {}).get("metric")
+    ok = table["result"] == "successful"
+    body = {
+        "runs": len(table), "chunks": manifest["n_chunks"], "sources": [str(m) for m in members],
+        "failed_runs": int((~ok).sum()), "metric": metric,
+    }  # fmt: skip
+    if metric in table.columns and ok.any():
+        try:
+            body["best"] = best(table, metric)
+        except ValueError:
+            body["best"] = None
+    return body

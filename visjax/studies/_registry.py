@@ -13,8 +13,10 @@ import importlib
 import importlib.util
 import inspect
 import os
+import pathlib
 import re
 import sys
+import traceback
 import types
 import typing
 import warnings
@@ -134,10 +136,51 @@ class Registered:
         return problem
 
 
+def build_problems(
+    name: str, *, data=None, noise_px=None, duration=None, rate_hz=None, variants=None,
+    every: bool = True, robust: bool = False, options=None,
+) -> list[tuple[str | None, AbstractProblem]]:  # fmt: skip
+    """The registered problem `name` built once, `[(None, problem)]`, or, for a problem
+    with named variants, once per variant, `[(variant, problem), ...]`: those of
+    `variants`, else every one when `every` (and no data file), else its default. The
+    options go to its builder (`robust`: its `robust=True`; `options`: more of its keyword
+    arguments; `None` values left out). **Raises:** `ValueError` for an unknown problem,
+    variant or option (`Registered.check`)."""
+    entry = registered(name)
+    data = None if data is None else str(data)
+    entry.check(data, duration, rate_hz, variants)
+    given = dict(
+        data=data, noise_px=noise_px, duration=duration, rate_hz=rate_hz,
+        robust=True if robust else None, **(options or {}),
+    )  # fmt: skip
+    if not variants and entry.variants and every and data is None:
+        variants = entry.variants
+    if variants:
+        return [(v, entry.make(variant=v, **given)) for v in variants]
+    return [(None, entry.make(**given))]
+
+
 class UserCodeError(Exception):
     """An error raised by code that registers or builds a problem (a module given to
     `--import`, a plugin, a problem's builder): the message names the code and the error
     in one line; the original error, with its traceback, is the `__cause__`."""
+
+    def user_traceback(self) -> str:
+        """The traceback of the user's error (the `__cause__`), from its first frame
+        outside visjax and the import machinery (empty for none)."""
+        error = self.__cause__
+        if error is None:
+            return ""
+        package = str(pathlib.Path(__file__).resolve().parents[1])
+        frames = traceback.extract_tb(error.__traceback__)
+        ours = ("<frozen importlib", "importlib/__init__.py", package)
+        while frames and any(
+            str(frames[0].filename).startswith(o) or o in frames[0].filename for o in ours
+        ):
+            frames = frames[1:]
+        body = "".join(traceback.format_list(frames))
+        last = "".join(traceback.format_exception_only(type(error), error))
+        return "Traceback (most recent call last):\n" + body + last
 
 
 def _where(f) -> str:

@@ -15,6 +15,30 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import Mesh
+
+
+class Refused(ValueError):
+    """A study refused before it runs (an unknown or invalid grid parameter, more than
+    `MAX_RUNS` runs, more memory than is available): one line."""
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """`"i/N"` (a job array's slice, `Study.shard`) as `(i, N)`, 0 <= i < N. **Raises:**
+    `ValueError`, one line."""
+    try:
+        i, n = (int(x) for x in str(text).split("/"))
+    except ValueError:
+        raise ValueError(f"expected i/N (e.g. 0/8), got {text!r}") from None
+    if not (n >= 1 and 0 <= i < n):
+        raise ValueError(f"expected i/N with 0 <= i < N, got {text!r}")
+    return (i, n)
+
+
+def device_mesh():
+    """A one-axis `jax.sharding.Mesh` (`"runs"`) over every JAX device: `Study.mesh` for
+    chunks sharded over the devices."""
+    return Mesh(np.array(jax.devices()), ("runs",))
 
 
 class Study(eqx.Module):

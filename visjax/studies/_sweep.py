@@ -24,7 +24,7 @@ from .._results import RESULTS, all_finite
 from .._xla_workaround import warn_if_hang_prone
 from ._parts import Parts
 from ._problem import AbstractProblem, FunctionProblem, check_values, run_identity, runner
-from ._study import Result, Study, study_of
+from ._study import Refused, Result, Study, study_of
 
 
 def log_axis(low: float | int, high: float | int, num: int) -> np.ndarray:
@@ -523,9 +523,9 @@ def _check_memory(compiled, leaves, key_data, chunk, max_memory, log):
         )
 
 
-class MemoryLimitError(ValueError):
+class MemoryLimitError(Refused):
     """A chunk of a sweep that would need more memory than it may use (the message says
-    how large a chunk fits)."""
+    how large a chunk fits): a `Refused` study."""
 
 
 class _Timer:

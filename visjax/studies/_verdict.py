@@ -12,7 +12,7 @@ import jax
 import numpy as np
 
 from .._results import result_names
-from ._problem import AbstractProblem, as_json, quality
+from ._problem import AbstractProblem, as_json, quality, quality_line
 
 
 @dataclass(frozen=True)
@@ -37,6 +37,21 @@ class Verdict:
     def metrics_json(self) -> dict:
         """The metrics as JSON numbers (`None` for a failed run)."""
         return as_json(self.metrics, self.ok)
+
+    def outcome(self, dropped: Mapping | None = None) -> tuple[str, str | None]:
+        """The run's result code and, when it is not a success, why (one phrase): a failed
+        run's code and sample; a data file with too many frames missing (`dropped`, the
+        data file's `visjax.io.dropped_report`); an estimate no better than the trivial
+        one (`worse_than_trivial`)."""
+        if self.result != "successful":
+            at = f" at sample {self.failed_sample}" if self.failed_sample >= 0 else ""
+            return self.result, f"the run failed: {self.result}{at}"
+        if dropped is not None and dropped["over"]:
+            return dropped["result"], f"the result is {dropped['result']}: {dropped['line']}"
+        if self.worse_than_trivial:
+            why = f"the result is worse_than_trivial: {quality_line(self.quality)}"
+            return "worse_than_trivial", why
+        return "successful", None
 
 
 def verdict(problem: AbstractProblem, method: str, solution, inputs) -> Verdict:

@@ -93,7 +93,7 @@ class HomographyProblem(AbstractProblem):
     data_parameters: ClassVar[tuple[str, ...]] = ("noise_px",)
 
     scene: HomographyScene
-    noise_px: Any = 0.0  # a data parameter (`at`); the builder makes it an array
+    noise_px: Float[ArrayLike, ""] = 0.0  # a data parameter (`at`): a noise sweep is one `vmap`
     robust: bool = eqx.field(static=True, default=False)
 
     def parameters(self):

@@ -8,7 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from ..._results import RESULTS
 from ..._util import number_text
@@ -92,7 +92,7 @@ class PointDepthProblem(AbstractProblem):
     data_parameters: ClassVar[tuple[str, ...]] = ("noise_px",)
 
     scene: PointDepthScene
-    noise_px: Any = 0.0  # a data parameter (`at`); the builder makes it an array
+    noise_px: Float[ArrayLike, ""] = 0.0  # a data parameter (`at`): a noise sweep is one `vmap`
     projection: str = eqx.field(static=True, default="planar")
     window: int = eqx.field(static=True, default=250)
     robust: bool = eqx.field(static=True, default=False)
