@@ -65,6 +65,8 @@ def _refused(argv, capsys) -> str:
 # 1. a failed run on a data file: its result code, one line, exit 1, its files kept
 
 
+@pytest.mark.slow  # the unit tier's time (the file route's failure: the next test; the code
+# `worse_than_trivial`: tests/studies/test_study.py's `Verdict.outcome`)
 def test_a_jumping_tracker_is_refused_or_named(tmp_path, capsys):
     """A tracker that switched to other coordinates from frame 50: 20,000 px sideways is
     outside the image the intrinsics imply, refused at load (exit 2, one line naming

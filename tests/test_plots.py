@@ -278,6 +278,8 @@ def _check_paper_figure(fig, name):
             assert not box.overlaps(ax.get_window_extent(renderer)), name
 
 
+@pytest.mark.slow  # the unit tier's time: every figure at 300 dpi in three formats (the
+# commands' tests write each figure once)
 @pytest.mark.parametrize("name", sorted(FUNCTIONS))
 def test_saved_in_every_format_labelled_with_units_at_paper_size(name, tmp_path):
     """Each plot function: saved as png (300 dpi), pdf and svg, the style per figure

@@ -56,6 +56,7 @@ def scene():
     return pixels, FixedCamera(pixels[0], A, R0, features[0], normal, z1)
 
 
+@pytest.mark.slow  # the unit tier's time: a Monte Carlo of 200 draws of three fits
 def test_predicted_spread_matches_the_monte_carlo(scene):
     """200 draws of 0.5 px noise, the centred and the causal fit: the predicted standard
     deviation of each component of $\\hat v$ (the root of the mean predicted variance)

@@ -54,7 +54,10 @@ def _close(a, b, tol=1e-10):
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=0, atol=tol)
 
 
-@pytest.mark.parametrize("every, unroll", [(1, 1), (7, 8)])
+@pytest.mark.parametrize(
+    "every, unroll",
+    [(1, 1), pytest.param(7, 8, marks=pytest.mark.slow)],  # the unit tier's time
+)
 def test_chunked_equals_prepared(streams, every, unroll):
     """300 steps in chunks of 64 (4 full chunks and a tail of 44), saved every step and
     every 7 (chunks rounded to whole saving periods), with a reducer, the fused run's loop

@@ -358,7 +358,9 @@ def test_dropped_samples_are_held_over():
         run(est, Stream(ts=stream.ts, ys=stream.ys, present=present[:10]))
 
 
-@pytest.mark.parametrize("saveat", [SaveAt(states=True), SaveAt(every=7)])
+@pytest.mark.parametrize(  # the second: the unit tier's time
+    "saveat", [SaveAt(states=True), pytest.param(SaveAt(every=7), marks=pytest.mark.slow)]
+)
 def test_unrolled_loop_gives_the_same_run(saveat):
     """`unroll` changes how many steps one loop iteration holds, not the run: outputs,
     states, reducer and result code equal the plain loop's, also for a failing run, under

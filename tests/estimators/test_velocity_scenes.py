@@ -193,6 +193,8 @@ def test_a_missing_feature_does_not_change_the_features_behind_e(runs):
     assert mixed > 2.0 * held, (mixed, held)
 
 
+@pytest.mark.slow  # the unit tier's time: three 10 s runs (the innovation's unit tests: the
+# moving-point estimator's, the homography problem's, the command line's)
 def test_innovation_gates_a_lagging_estimator_without_the_truth(runs):
     """Issue 44 (item 1, without the truth): the estimator's output error e - e_hat against
     the noise its frames imply (`velocity_innovation`). The paper's gains track their

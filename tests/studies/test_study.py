@@ -158,3 +158,25 @@ def test_one_handler_asks_a_listening_study_to_stop_then_interrupts():
     study = studies.Study(chunk=1, stop=lambda: next(asked))
     with pytest.raises(KeyboardInterrupt):
         studies.sweep(p, {"gain": np.array([0.5, 1.0, 2.0])}, np.arange(1), study=study)
+
+
+def test_a_runs_outcome_names_why_it_is_not_a_success():
+    """`Verdict.outcome`, what `visjax run` reports and exits 1 on: a failed run's code and
+    sample, a data file with too many frames missing, an estimate no better than the
+    trivial one; otherwise `successful` (no reason)."""
+    from visjax.studies import Verdict
+
+    judged = {
+        "metric": "rms", "ratio_to_trivial": 12.0, "trivial_estimate": "zero velocity",
+        "trivial": 0.1, "threshold": 1.0, "flag": "worse_than_trivial",
+    }  # fmt: skip
+    ok = Verdict("estimator", "successful", -1, {}, True, dict(judged, flag="ok"))
+    assert ok.outcome() == ("successful", None)
+    failed = Verdict("estimator", "diverged", 41, {}, False, None)
+    assert failed.outcome() == ("diverged", "the run failed: diverged at sample 41")
+    dropped = {"over": True, "result": "too_many_dropped_frames", "line": "75 of 100 missing"}
+    code, why = ok.outcome(dropped)
+    assert code == "too_many_dropped_frames" and why.endswith("75 of 100 missing")
+    assert failed.outcome(dropped)[0] == "diverged"  # the run's own failure first
+    code, why = Verdict("estimator", "successful", -1, {}, True, judged).outcome()
+    assert code == "worse_than_trivial" and "12 times that of zero velocity" in why
