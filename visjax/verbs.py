@@ -12,6 +12,7 @@ import json
 import shutil
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -35,13 +36,13 @@ class Request:
     command: str
     problem: str = ""
     method: str | None = None
-    data: str | None = None
+    data: str | Path | None = None
     noise: float = 0.1
     seed: int = 0
     seeds: int = 1
     duration: float | None = None
     rate: float | None = None
-    variants: tuple[str, ...] | None = None
+    variants: Sequence[str] | None = None
     robust: bool = False
     grid: str | None = None
     chunk: int = 64
@@ -52,10 +53,10 @@ class Request:
     force: bool = False
     ray: str | None = None
     max_hours: float = MAX_HOURS
-    paths: tuple[str, ...] = ()
+    paths: Sequence[str] = ()
     out: str | None = None
     quiet: bool = False
-    formats: tuple[str, ...] = ("png",)
+    formats: Sequence[str] = ("png",)
     options: dict | None = None
 
     def __post_init__(self):
@@ -109,12 +110,9 @@ def _each(r: Request, items, one) -> dict:
         results[tag] = command_summary(
             kind, body, settings=settings, seed=r.seed, started=started, out=folder
         )
-    if list(results) == [None]:
-        summary = results[None]
-    else:
-        summary = command_summary(
-            "sets", {"sets": results}, settings=settings, seed=r.seed, started=started, out=r.out
-        )
+    summary = results.get(None) if list(results) == [None] else command_summary(
+        "sets", {"sets": results}, settings=settings, seed=r.seed, started=started, out=r.out
+    )  # fmt: skip
     if r.out is not None:
         print(f"wrote {user_path(str(r.out))}")
     return summary
