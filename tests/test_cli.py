@@ -518,6 +518,8 @@ def test_noise_seeds_give_medians_and_the_spread(tmp_path, capsys):
     assert "needs --noise above 0" in err and "not to --data" in err
 
 
+@pytest.mark.slow  # its video and 300-dpi figure (5 s): the reproduction smoke above runs the
+# testbed's job in the unit tier
 def test_testbed_command(tmp_path):
     """`visjax testbed` end to end on set I.1: the PUMA's camera follows the set, the
     marker is tracked, the observer runs on the tracked pixels."""

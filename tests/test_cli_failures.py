@@ -274,10 +274,25 @@ def test_tune_measures_its_chunk_before_it_runs(monkeypatch, capsys):
 # 4. the coverage of a data file: reported, and past the limit not "successful"
 
 
+def test_the_study_commands_read_the_dropped_fraction_of_a_file(tmp_path):
+    """The fraction of frames with a feature missing, read from the file by the study
+    commands before any run (the command's run on it is the slow test below)."""
+    path = _velocity_file(tmp_path / "drop.npz", drop_from=25, dtype=np.float32)
+    assert io.VelocityData.load(path).dropped_fraction() == 0.75 > io.MAX_DROPPED_FRACTION
+    dropped = verbs._dropped(verbs.Request("run", "velocity", data=str(path)))
+    assert dropped["fraction"] == 0.75 and dropped["over"]
+    import tests.studies.slow_toy  # noqa: F401  (registers slow-toy)
+
+    toy = verbs.Request("run", "slow-toy", data=str(path))
+    assert verbs._dropped(toy) is None  # a format of its own: not reported
+    full = _velocity_file(tmp_path / "full.npz")
+    assert not verbs._dropped(verbs.Request("run", "velocity", data=str(full)))["over"]
+
+
+@pytest.mark.slow  # a velocity problem's compile on a file of its own shapes (13 s)
 def test_a_file_with_most_frames_missing_a_feature_is_not_successful(tmp_path, capsys):
     # float32, as a tracker may write it: it runs as float64
     path = _velocity_file(tmp_path / "drop.npz", drop_from=25, dtype=np.float32)
-    assert io.VelocityData.load(path).dropped_fraction() == 0.75 > io.MAX_DROPPED_FRACTION
     out = tmp_path / "out"
     assert main(["velocity", "--data", str(path), "--quiet", "--out", str(out)]) == 1
     printed = capsys.readouterr()
@@ -286,13 +301,6 @@ def test_a_file_with_most_frames_missing_a_feature_is_not_successful(tmp_path, c
     summary = io.read_summary(out / "summary.json")
     assert summary["dropped_fraction"] == 0.75
     assert summary["result"] == "too_many_dropped_frames" != "successful"
-    # the study verbs read the same fraction from the file
-    dropped = verbs._dropped(verbs.Request("run", "velocity", data=str(path)))
-    assert dropped["fraction"] == 0.75 and dropped["over"]
-    import tests.studies.slow_toy  # noqa: F401  (registers slow-toy)
-
-    toy = verbs.Request("run", "slow-toy", data=str(path))
-    assert verbs._dropped(toy) is None  # a format of its own: not reported
 
 
 def test_variant_names_never_write_outside_out(tmp_path, capsys):

@@ -81,6 +81,8 @@ def test_poses_and_fits_exact_on_a_constant_twist(constant, poses):
     assert np.all(v[0] == 0.0)
 
 
+@pytest.mark.slow  # a second fit's compile at another window (4 s): the unit tier keeps the
+# fit's exactness on its model and its gradient
 def test_stated_bandwidth_is_the_minus_3db_point():
     """On a pose oscillating at the stated bandwidth, the fit's velocity has 1/sqrt(2) of
     the true amplitude (the sinusoid is not the fit's model: this checks the bandwidth)."""

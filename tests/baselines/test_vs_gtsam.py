@@ -42,6 +42,11 @@ from visjax.papers import nath
 
 gtsam = pytest.importorskip("gtsam")
 
+# A peer library's agreement, run in CI's slow tier: the unit tier keeps visjax's own
+# oracles of these baselines (exact on noise-free data, the reprojection minimum's
+# gradient: tests/baselines/test_bundle.py, test_point_fit.py, test_triangulation_robust.py).
+pytestmark = pytest.mark.slow
+
 NOISE_PX = (0.0, 0.5, 1.0)
 # optimistix's Levenberg-Marquardt stops after an accepted step below rtol and atol (in the
 # unknowns and in the residuals): the baselines' defaults, its last step 1e-9 (static

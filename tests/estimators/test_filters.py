@@ -5,13 +5,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.signal
 
 from tests.helpers import central_difference
 from visjax.estimators import lowpass, lowpass_delay
 
 
 def test_matches_scipy_zoh_and_states_its_gain_and_delay():
+    import scipy.signal  # here, not at collection (a second of import in each worker)
+
     fc, h = 5.0, 1e-3
     ts = jnp.arange(4000, dtype=float) * h
     rng = np.random.default_rng(0)

@@ -268,6 +268,7 @@ def test_bad_input_names_the_argument(no_jaxtyping, scenes):
             find_homography_robust(*args, **kwargs)
 
 
+@pytest.mark.slow  # a 200-seed Monte Carlo (4 s): the unit tier's budget
 def test_covariance_predicts_the_spread_over_noise_seeds():
     """`cov` (the inliers' transfer errors, $\\hat\\sigma^2 (J^TJ)^{-1}$) against the spread
     of the eight entries of `H` over 200 noise seeds at 0.5 px, with 10% outliers: each

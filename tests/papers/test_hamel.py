@@ -193,6 +193,8 @@ def test_scene_group_velocity_and_bearings(tracking):
     np.testing.assert_allclose(np.trace(np.asarray(sc.A), axis1=1, axis2=2), 0.0, atol=1e-15)
 
 
+@pytest.mark.slow  # every method's compile at the fixture's length (10 s): the unit tier's
+# budget; the compare command below runs every method, the estimator's convergence is above
 def test_problem_methods_without_noise(tracking):
     """Noise-free: the per-frame baselines are exact (DLT to 1e-12, OpenCV's RANSAC to
     1e-6); the observer from the identity (0.27 away) converges at k_P = 100, with the
@@ -268,6 +270,8 @@ def test_velocity_front_end(tracking):
     )
 
 
+@pytest.mark.slow  # the sweep and run commands' compiles on this problem (4 s): the commands'
+# smoke tests run them on the moving point, the compare command above on this problem
 def test_sweep_and_run_commands(tmp_path, capsys):
     """`visjax sweep homography` and `visjax run homography` with no other change: the
     grid's rows, the defaults reported as visjax's own ("defaults", the JSON key staying

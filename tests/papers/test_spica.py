@@ -156,6 +156,8 @@ def test_bad_input(scene, no_jaxtyping):
         spica.point_depth_stream(ts, pixels, twists[:, :3], A)
 
 
+@pytest.mark.slow  # three noise draws and the least-squares baseline's compile (6 s): the unit
+# tier keeps the observer's noise-free convergence and the problem's jit, vmap and grad
 def test_problem_estimator_and_least_squares_on_the_same_draws():
     """The point-depth problem at 0.5 px, three seeds: the observer's worst final depth
     error below 3% (measured 0.6-1.4%), settled within 5% by 0.4 s; the least-squares
