@@ -29,7 +29,11 @@ def _blocks(language):
 def module_dir(tmp_path_factory):
     folder = tmp_path_factory.mktemp("extending")
     (folder / "my_problem.py").write_text("\n\n".join(_blocks("python")))
-    return folder
+    yield folder
+    from visjax.studies import _registry
+
+    # the page's module adds a method to the velocity problem: gone for the other modules
+    _registry._ADDED.get("velocity", {}).pop("differenced", None)
 
 
 def test_the_page_runs_from_the_command_line(module_dir, monkeypatch, capsys):
@@ -101,3 +105,27 @@ def test_the_page_runs_as_a_script(module_dir):
     best = float(re.search(r"best bandwidth: .*?\} ([\d.e+-]+) px/s", proc.stdout).group(1))
     tuned = float(re.search(r"tuned: .*?\} ([\d.e+-]+)", proc.stdout).group(1))
     assert tuned <= best
+
+
+@pytest.mark.slow  # the velocity problem's compiles (about 30 s)
+def test_a_method_of_your_own_beside_the_velocity_estimator(module_dir, monkeypatch, capsys):
+    """The page's second example from the command line: the differenced velocity added to
+    the registered `velocity` problem by the `--import`ed module, run, swept over its own
+    parameter and compared with the estimator on the same draws; at 0.1 px over 1 s it
+    beats zero velocity (the trivial estimate) and its swept cutoff beats its default on
+    held-out seeds."""
+    monkeypatch.chdir(module_dir)
+    commands = [shlex.split(line) for line in _blocks("bash")[1].strip().splitlines()]
+    assert [c[3] for c in commands] == ["run", "sweep", "compare"]
+    for argv in commands:
+        assert main([*argv[1:], "--quiet"]) == 0, argv
+    run = read_summary(module_dir / "diff_run" / "summary.json")
+    assert run["method"] == "differenced" and run["result"] == "successful"
+    assert run["quality"]["ratio_to_trivial"] < 1, run["quality"]
+    sweep = read_summary(module_dir / "diff_sweep" / "summary.json")
+    assert sweep["method"] == "differenced" and sweep["best"]["metric"] < sweep["paper"]["metric"]
+    records = pd.read_parquet(module_dir / "diff_compare" / "records.parquet")
+    assert list(records["method"]) == ["estimator", "differenced"] * 2
+    assert (records["result"] == "successful").all()
+    settings = read_summary(module_dir / "diff_compare" / "summary.json")["problem_settings"]
+    assert settings["added_methods"]["differenced"]["like"] == "ekf"

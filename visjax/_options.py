@@ -76,6 +76,14 @@ def set_name(text: str) -> str:
     return text
 
 
+def method_names(text: str) -> tuple[str, ...]:
+    """`--methods a,b,c`: names, each checked on the built problem (its own and added)."""
+    names = tuple(t.strip() for t in text.split(","))
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"--methods {text!r}: names separated by commas")
+    return names
+
+
 OWN_DATA = "your own data file (.npz, see docs/your-own-data.md)"
 OUT = "summary.json, the estimates and the figures"
 
@@ -131,6 +139,9 @@ def verb(sub, name, help, *, seeds, noise, grid):
     arg(p, "--set", None, None, "a variant (moving_point: I.1 ... II.3)", action="append")
     robust = "the problem's robust settings (robust losses, outlier gates; not moving_point)"
     arg(p, "--robust", help=robust, action="store_true")
+    if name != "run":
+        which = "every one" if name == "compare" else "the estimator; each in turn"
+        arg(p, "--methods", method_names, None, f"a,b,c: the methods (default {which})")
     if grid:
         arg(p, "--grid", grid_spec, None, 'e.g. "K_scale=1e-2:1e1:8,rho_scale=0.1/1"')
         arg(p, "--chunk", count, 64, "runs per vmap call (default 64)")

@@ -116,7 +116,7 @@ def _problem_parser(sub, name, old, who):
     return p
 
 
-_STUDIES = ("compare", "sweep", "tune")  # sized before any work: `verbs.check_study`
+_STUDIES = ("run", "compare", "sweep", "tune")  # built, checked, sized: `verbs.check_study`
 _VERBS = {"run": "run", "compare": "compare", "sweep": "sweep", "tune": "sweep", "merge": "merge"}
 
 
@@ -183,9 +183,7 @@ def _check(a) -> None:
             else "--seeds above 1 needs --noise above 0: noise-free runs are all the same"
         )
     if a.command in ("run", "compare", "sweep", "tune"):  # the problem's name and options
-        registered(a.problem).check(
-            a.data, a.duration, a.rate, a.set, a.robust, getattr(a, "method", None)
-        )
+        registered(a.problem).check(a.data, a.duration, a.rate, a.set, a.robust)
     check_output_path(a.out, file=getattr(a, "out_is_file", False))
     if a.command == "track" and not Path(a.video).is_file():
         raise ValueError(f"video {a.video!r}: no such file")

@@ -36,6 +36,7 @@ class Request:
     command: str
     problem: str = ""
     method: str | None = None
+    methods: Sequence[str] | None = None
     data: str | Path | None = None
     noise: float = 0.1
     seed: int = 0
@@ -91,12 +92,21 @@ class Request:
 
 
 def check_study(r: Request) -> list:
-    """A study's size before any work (`studies.check_study`: runs, grid, memory; raises
-    `Refused`): the problems, built once, for the command (`built=`)."""
+    """The problems, built once, for the command (`built=`), its methods checked on them,
+    and a study's size before any work (`studies.check_study`: runs, grid, memory);
+    `Refused`, one line."""
+    if r.command == "run":
+        built = r.problems()
+        for tag, p in built:
+            try:
+                p.check_method(r.method)
+            except ValueError as e:
+                raise Refused(f"run {r.problem}{f' [{tag}]' if tag else ''}: {e}") from None
+        return built
     return studies.check_study(
         r.command, registered(r.problem).name, r.problems, spec=r.grid, seeds=r.seeds,
         study=Study(chunk=r.chunk, shard=r.job), steps=r.steps if r.command == "tune" else 0,
-        variants=len(r.variants) if r.variants else 1,
+        variants=len(r.variants) if r.variants else 1, methods=r.methods,
     )  # fmt: skip
 
 
@@ -176,19 +186,6 @@ def run_command(r: Request, built=None) -> dict:
     return summary
 
 
-def _print_medians(p, records, worse) -> None:
-    """The medians per method over the seeds (`Comparison.medians`), a row each."""
-    import pandas as pd
-
-    table = pd.DataFrame(records.medians(p.metric))
-    std = table.pop("std_key").iloc[0] if "std_key" in table else None
-    if worse is not None:
-        table["worse than trivial"] = table["method"].map(worse)
-    names = {"metric": f"{p.metric} (median)", "std": f"predicted {std}"}
-    table = table.rename(columns=names | {"latency": "latency/sample (s)"})
-    print(table.to_string(index=False, na_rep="-", float_format="{:.4g}".format))
-
-
 def compare_command(r: Request, built=None) -> dict:
     """`visjax compare PROBLEM`: every method of the problem on identical noisy inputs
     (`studies.compare`, `seeds` seeds), refused after the first seed when the whole would
@@ -200,7 +197,7 @@ def compare_command(r: Request, built=None) -> dict:
     def one(p, head, folder):
         try:
             study = Study(progress=not r.quiet, max_seconds=r.max_hours * 3600)
-            records = studies.compare(p, r.keys(), study=study)
+            records = studies.compare(p, r.keys(), methods=r.methods, study=study)
         except studies.StudyTooLong as e:
             where = f"compare {r.problem} {head}".strip()
             raise Refused(f"{where}: {e}: use fewer --seeds or raise --max-hours") from None
@@ -215,7 +212,8 @@ def compare_command(r: Request, built=None) -> dict:
         worse, judged = studies.judge_records(p, records)
         if judged is not None:
             body["quality"] = judged
-        _print_medians(p, records, worse)
+        table = records.medians_table(p.metric, worse)
+        print(table.to_string(index=False, na_rep="-", float_format="{:.4g}".format))
         if worse is not None and any(worse.values()):
             print(
                 f"{head}warning: {sum(worse.values())} run(s) no better than "
@@ -255,7 +253,8 @@ def sweep_command(r: Request, built=None) -> dict:
         except (ImportError, ConnectionError) as e:
             raise ValueError(str(e)) from None
 
-    def one(p, head, folder):
+    def one(pm, head, folder):
+        p, method = pm
         if not p.scored:
             raise ValueError(f"{p.title}: {r.command} needs the truth (the data file has none)")
         parts, spec, keys = None, r.grid or p.grid, (r.keys(), r.keys(held=True))
@@ -270,7 +269,8 @@ def sweep_command(r: Request, built=None) -> dict:
                 )  # fmt: skip
                 adam = {"optimiser": optax.adam(r.learning_rate), "steps": r.steps}
                 select = studies.sweep_then_tune if tune else studies.sweep_then_hold_out
-                found = select(p, spec, *keys, study=study, **(adam if tune else {}))
+                kw = {"method": method, **(adam if tune else {})}
+                found = select(p, spec, *keys, study=study, **kw)
         except KeyboardInterrupt:
             if parts is None:
                 raise
@@ -291,12 +291,8 @@ def sweep_command(r: Request, built=None) -> dict:
             name = p.defaults_label if name == "paper" else name
             print(f"{head}{name:<11} {values:<40} held-out {p.metric} = {x['metric']:.4g}{failed}")
         held = [r.seed + r.seeds, r.seed + 2 * r.seeds - 1]
-        result = found.report(p) | {
-            "grid": spec,
-            "noise_px": r.noise,
-            "seeds": r.seeds,
-            "held_out_seeds": held,
-        }
+        result = found.report(p) | {"method": p.check_method(method), "grid": spec}
+        result |= {"noise_px": r.noise, "seeds": r.seeds, "held_out_seeds": held}
         if tune:
             adam = f"optax.adam({r.learning_rate}) on the log parameters, forward mode"
             result |= {"steps": r.steps, "optimiser": adam}
@@ -325,8 +321,13 @@ def sweep_command(r: Request, built=None) -> dict:
             shutil.copytree(parts, folder / "parts", dirs_exist_ok=True)
         return r.command, result, folder
 
+    methods = r.methods or (None,)  # several: a folder each (with the variant's name)
+    items = [
+        (" ".join(filter(None, (tag, m if len(methods) > 1 else None))) or None, (p, m))
+        for tag, p in built or r.problems() for m in methods
+    ]  # fmt: skip
     try:
-        return _each(r, built or r.problems(), one)
+        return _each(r, items, one)
     finally:
         if executor is not None:
             executor.shutdown()

@@ -16,6 +16,7 @@ from ._compare import (
     compare as compare,
 )
 from ._executors import RayExecutor as RayExecutor
+from ._methods import Method as Method, WithMethods as WithMethods
 from ._parts import (
     PartsError as PartsError,
     clear_parts as clear_parts,
@@ -64,12 +65,14 @@ from ._problem import (
 )
 from ._registry import (
     UserCodeError as UserCodeError,
+    add_method as add_method,
     build_problems as build_problems,
     load_module as load_module,
     problem as problem,
     problem_names as problem_names,
     register_problem as register_problem,
     registered as registered,
+    remove_method as remove_method,
 )
 from ._reproductions import (
     REFERENCE_KINDS as REFERENCE_KINDS,

@@ -4,7 +4,7 @@ seeds, with accuracy, result code and timing per run, as tidy records."""
 import statistics
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -48,10 +48,23 @@ class Comparison(Result, list):
                 "latency": float(np.median([r["latency_s_per_sample"] for r in rows])),
             }
             if std_key is not None:
-                worst = [w for w in (_largest(r[std_key]) for r in rows) if w is not None]
+                worst = [w for w in (_largest(r.get(std_key)) for r in rows) if w is not None]
                 row.update(std_key=std_key, std=float(np.median(worst)) if worst else None)
             out.append(row)
         return out
+
+    def medians_table(self, metric: str, worse: Mapping[str, int] | None = None):
+        """`medians(metric)` as the table `visjax compare` prints (a pandas DataFrame, its
+        columns named for a reader); `worse`: per method, the runs no better than the
+        trivial estimate (`judge_records`), a column of its own."""
+        import pandas as pd
+
+        table = pd.DataFrame(self.medians(metric))
+        std = table.pop("std_key").iloc[0] if "std_key" in table else None
+        if worse is not None:
+            table["worse than trivial"] = table["method"].map(worse)
+        names = {"metric": f"{metric} (median)", "std": f"predicted {std}"}
+        return table.rename(columns=names | {"latency": "latency/sample (s)"})
 
 
 def _largest(value):
@@ -66,11 +79,13 @@ def compare(
     keys: Any = None,
     *old: Any,
     params: Mapping[str, Any] | None = None,
+    methods: Sequence[str] | None = None,
     study: Study | None = None,
     **legacy: Any,
 ) -> Comparison:
-    """Every method of `problem` (its estimator and baselines) on identical inputs for each
-    noise key, and how each did.
+    """Every method of `problem` (its estimator, its baselines and the methods added to
+    it), or those named in `methods`, on identical inputs for each noise key, and how each
+    did.
 
     `compare(problem, keys, params=..., study=Study(...))`: the problem's noisy inputs of
     each key (every method sees the same draw), each method's solution with `params`
@@ -85,6 +100,7 @@ def compare(
     - `keys`: the noise seeds: a 1-D array of ints (`jax.random.key(seed)` each) or of
         typed PRNG keys (the records' `seed` is then the index).
     - `params`: name -> value, overriding the defaults for every method.
+    - `methods`: the methods to run, in this order (default: every one).
     - `study`: a `Study`: its `repeats` (timed calls per method and key, after the
         compiling one; the median is reported), `progress` and `max_seconds` (a limit on
         the whole comparison's run time: after the first key the rest is estimated from
@@ -103,6 +119,8 @@ def compare(
     """
     version3 = {"seeds", "first_seed", "updates"} & set(legacy)
     if not isinstance(problem, AbstractProblem) or old or version3 or keys is None:
+        if methods is not None:
+            raise ValueError("`methods` is for `compare(problem, keys, ...)`.")
         return _version3(problem, keys, *old, params=params, study=study, **legacy)
     study = study_of(study, "compare", **legacy)
     typed, seed_values = seed_keys(keys, "compare")
@@ -118,9 +136,10 @@ def compare(
         spread = jax.tree_util.tree_map(np.asarray, resolved.uncertainty(name, sol))
         return {**as_json(values, ok), **as_json(spread, ok, nullable=True)}
 
-    updates = {m: resolved.updates(m) for m in resolved.methods}
+    runs = method_runs(resolved, params, methods)
+    updates = {m: resolved.updates(m) for m in runs}
     return _compare(
-        method_runs(resolved, params), problem_inputs, problem_score, typed, seed_values,
+        runs, problem_inputs, problem_score, typed, seed_values,
         updates, study,
     )  # fmt: skip
 

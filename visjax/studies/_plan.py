@@ -109,14 +109,17 @@ def check_grid_text(spec: str) -> str:
 
 
 def check_study(
-    kind: str, name: str, build, *, spec=None, seeds: int = 1, study=None, steps=0, variants=1
-) -> list:
+    kind: str, name: str, build, *, spec=None, seeds: int = 1, study=None, steps=0, variants=1,
+    methods=None,
+) -> list:  # fmt: skip
     """A study's size before any compile, what the command line checks: the run count (at
     most `MAX_RUNS`; first from the grid's text `spec` and the `variants` count, before
     anything is built), then on the problems `build()` returns (`[(tag, problem)]`, built
     once) the grid (`check_grid`: `spec`, or each problem's default) and `plan` (the runs
     again, a lower bound of the memory against `available_memory()`, of the job's slice
-    with `study.shard`). **Raises:** `Refused`, one line. **Returns:** the built problems."""
+    with `study.shard`); `methods` (the selected methods: each checked, and a grid axis
+    none of them uses refused; default: every method for compare, the estimator for a
+    sweep or a tuning). **Raises:** `Refused`, one line. **Returns:** the built problems."""
     count = 1 if spec is None else grid_size(spec)
     if count is not None:
         what = f"{count} grid points x {seeds} seeds" if spec else f"{seeds} seeds"
@@ -125,8 +128,14 @@ def check_study(
     built, total = build(), 0
     for tag, p in built:
         where = name if tag is None else f"{name} [{tag}]"
-        points = None if kind == "compare" else check_grid(p, spec or p.grid, where)
-        found = plan(p, points, seeds, study, kind=kind, steps=steps)
+        try:
+            chosen = p.check_methods(methods if methods or kind == "compare" else [None])
+            points = None if kind == "compare" else check_grid(p, spec or p.grid, where)
+            if points is not None:
+                p.check_axes(list(points), chosen)
+        except ValueError as e:  # the problem's message names it; a variant's tag added
+            raise Refused(str(e) if tag is None else f"[{tag}] {e}") from None
+        found = plan(p, points, seeds, study, kind=kind, steps=steps, methods=len(chosen))
         found.check(where)
         total += found.runs
     check_run_count(kind, total, f"{len(built)} problem(s), their grids and {seeds} seeds")
@@ -149,6 +158,7 @@ def plan(
     *,
     kind: str = "sweep",
     steps: int = 0,
+    methods: int | None = None,
 ) -> Plan:
     """The runs and a lower bound of the memory of a study of `problem`, before any
     compile: the noisy inputs of a chunk of runs (sweep; tune: of every key at once, its
@@ -157,13 +167,14 @@ def plan(
 
     **Arguments:** `problem`; `points` (name -> values, the grid; `None` for compare);
     `keys` (the keys, or their number); `study` (its `chunk` and `shard`); `kind`
-    (`"compare"`, `"sweep"` or `"tune"`); `steps` (tune's)."""
+    (`"compare"`, `"sweep"` or `"tune"`); `steps` (tune's); `methods` (compare's count
+    of methods, default every one)."""
     if kind not in KINDS:
         raise ValueError(f"`kind` must be one of {KINDS}; got {kind!r}.")
     study = Study() if study is None else study
     seeds = int(keys) if np.ndim(keys) == 0 else len(keys)
     per_run = input_bytes(problem)
-    methods = len(problem.methods)
+    methods = len(problem.methods) if methods is None else methods
     if kind == "compare" or not points:
         records = seeds * methods * RECORD_BYTES
         runs = study_runs("compare", 1, seeds, methods=methods)
@@ -266,21 +277,28 @@ def defaults_of(problem: AbstractProblem, names) -> dict:
 
 
 def sweep_then_hold_out(
-    problem: AbstractProblem, points, keys, held_keys, *, study: Study | None = None
+    problem: AbstractProblem,
+    points,
+    keys,
+    held_keys,
+    *,
+    method: str | None = None,
+    study: Study | None = None,
 ) -> Selection | SweepResult:
-    """A sweep of `points` over `keys`, its best point by the mean headline metric, and
+    """A sweep of `method` (default the estimator) at `points` over `keys`, its best point
+    by the mean headline metric, and
     the best point and the defaults re-measured on `held_keys` (`held_out`): the honest
     figure of a chosen point; `points` may be a `parse_grid` spec (checked: `check_grid`).
     With `study.shard` (a job's slice), only the slice's `SweepResult` (the best point
     needs every run)."""
-    study = Study() if study is None else study
-    points = check_grid(problem, points, problem.title) if isinstance(points, str) else points
-    table = sweep(problem, points, keys, study=study)
+    study, method = Study() if study is None else study, problem.check_method(method)
+    points = _points(problem, points, method)
+    table = sweep(problem, points, keys, method=method, study=study)
     if study.shard is not None:
         return table
     chosen = best(table, problem.metric)
     named = {"best": chosen["params"], "paper": defaults_of(problem, chosen["params"])}
-    held = held_out(problem, named, held_keys, study=study)
+    held = held_out(problem, named, held_keys, method=method, study=study)
     return Selection(table, summarise(table, problem.metric), chosen, held)
 
 
@@ -290,6 +308,7 @@ def sweep_then_tune(
     keys,
     held_keys,
     *,
+    method: str | None = None,
     optimiser: Any = None,
     steps: int = 30,
     study: Study | None = None,
@@ -300,14 +319,14 @@ def sweep_then_tune(
     refines the basin a global sweep found (the sign-based and resetting laws make the
     loss piecewise smooth); it does not replace the sweep. `points` as in
     `sweep_then_hold_out`."""
-    study = Study() if study is None else study
+    study, method = Study() if study is None else study, problem.check_method(method)
     if study.shard is not None:
         raise ValueError("a tuning follows one path: it needs every run of its sweep, not a shard")
-    points = check_grid(problem, points, problem.title) if isinstance(points, str) else points
-    table = sweep(problem, points, keys, study=study)
+    points = _points(problem, points, method)
+    table = sweep(problem, points, keys, method=method, study=study)
     chosen = best(table, problem.metric)
     tuned = tune(
-        problem, chosen["params"], keys, optimiser=optimiser, steps=steps,
+        problem, chosen["params"], keys, method=method, optimiser=optimiser, steps=steps,
         study=Study(progress=study.progress),
     )  # fmt: skip
     named = {
@@ -315,8 +334,20 @@ def sweep_then_tune(
         "sweep best": chosen["params"],
         "paper": defaults_of(problem, chosen["params"]),
     }
-    held = held_out(problem, named, held_keys, study=study)
+    held = held_out(problem, named, held_keys, method=method, study=study)
     return Selection(table, summarise(table, problem.metric), chosen, held, tuned)
+
+
+def _points(problem: AbstractProblem, points, method: str) -> dict:
+    """A study's points of `method`: a `parse_grid` spec checked (`check_grid`), and every
+    axis one the method uses (`AbstractProblem.check_axes`)."""
+    if isinstance(points, str):
+        points = check_grid(problem, points, problem.title)
+    try:
+        problem.check_axes(list(points), [method])
+    except ValueError as e:
+        raise Refused(str(e)) from None
+    return points
 
 
 def merge_summary(table, manifest: Mapping, members) -> dict:

@@ -9,6 +9,7 @@ methods take (`parameters`: defaults, units, positivity) and how a solution is s
 """
 
 import abc
+import difflib
 import hashlib
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
@@ -87,7 +88,9 @@ class AbstractProblem(eqx.Module):
     - `metrics(method, solution)`: name -> array, against the truth the problem holds
         (pure JAX; computed inside `vmap`).
 
-    Optional: `data_parameters` (the parameters that are data, not gains: each sets the
+    Optional: `own_parameters` (method -> the names of the parameters it uses,
+    `method_parameters`: a grid axis no selected method uses is refused); `data_parameters`
+    (the parameters that are data, not gains: each sets the
     problem's field of the same name, `at`, e.g. `noise_px`, `noise_parameter`); `label`
     (the headline metric with its units); `grid` (the default grid of
     `visjax sweep`, a `parse_grid` spec); `title` (a one-line description); `scored`
@@ -117,6 +120,7 @@ class AbstractProblem(eqx.Module):
     defaults_label: ClassVar[str] = "paper"
     trivial_label: ClassVar[str] = "the trivial estimate"
     data_parameters: ClassVar[tuple[str, ...]] = ()
+    own_parameters: ClassVar[Mapping[str, tuple[str, ...]]] = {}
 
     @abc.abstractmethod
     def parameters(self) -> dict[str, Parameter]:
@@ -249,15 +253,52 @@ class AbstractProblem(eqx.Module):
             lambda p: [getattr(p, n) for n in names], self, [params[n] for n in names]
         )
 
+    def method_parameters(self, method: str) -> tuple[str, ...]:
+        """The tunable parameters `method` uses (its gains; the data parameters, such as
+        `noise_px`, belong to every method and are not listed): `own_parameters[method]`
+        where the problem states it, else every parameter that is not data. A sweep or a
+        tuning of selected methods refuses a grid axis that none of them uses."""
+        if method in self.own_parameters:
+            return tuple(self.own_parameters[method])
+        data = set(self.data_parameters)
+        return tuple(n for n in self.parameters() if n not in data)
+
     def check_method(self, method: str | None) -> str:
-        """The method's name (`None`: the estimator, the first); `ValueError` if unknown."""
+        """The method's name (`None`: the estimator, the first). **Raises:** `ValueError`
+        naming the problem's methods (the closest one suggested) and how to add one."""
         if method is None:
             return self.methods[0]
         if method not in self.methods:
+            close = difflib.get_close_matches(str(method), list(self.methods), n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise ValueError(
-                f"{self.title}: unknown method {method!r}; choose from {list(self.methods)}."
+                f"{self.title}: unknown method {method!r}{hint}; its methods are "
+                f"{list(self.methods)} (a method of your own: visjax.studies.add_method)."
             )
         return method
+
+    def check_methods(self, methods: Sequence[str] | None) -> tuple[str, ...]:
+        """The methods a study runs: `methods` (each checked, `check_method`; in the given
+        order, once each), or every method when `None`."""
+        if methods is None:
+            return tuple(self.methods)
+        if isinstance(methods, str) or not len(methods):
+            raise ValueError(f"`methods` must be a non-empty list of names; got {methods!r}.")
+        return tuple(dict.fromkeys(self.check_method(m) for m in methods))
+
+    def check_axes(self, names, methods: Sequence[str]) -> None:
+        """A sweep's or a tuning's parameter names (`names`) for `methods`: a parameter of
+        the problem that is neither data nor used by any of them (`method_parameters`) is
+        refused (the methods would be swept over a parameter they ignore)."""
+        used = set(self.data_parameters).union(*(self.method_parameters(m) for m in methods))
+        idle = [n for n in names if n in self.parameters() and n not in used]
+        if idle:
+            owners = {n: [m for m in self.methods if n in self.method_parameters(m)] for n in idle}
+            said = "; ".join(f"{n!r} is used by {owners[n] or 'no method'}" for n in idle)
+            raise ValueError(
+                f"{self.title}: {said}, not by the selected method(s) {list(methods)}: drop "
+                "it from the grid or select a method that uses it (--methods)."
+            )
 
 
 def _output_fields(solution) -> dict[str, np.ndarray]:
@@ -570,8 +611,8 @@ def _solve_outputs(run, key):
     return problem.solve(run.method, run.params, problem.inputs(key), outputs=True)
 
 
-def method_runs(problem: AbstractProblem, params=None) -> dict:
-    """name -> `inputs -> solution` of every method (for the functional `compare`)."""
+def method_runs(problem: AbstractProblem, params=None, methods=None) -> dict:
+    """name -> `inputs -> solution` of every method, or of `methods` (for `compare`)."""
     resolved = problem.resolve(params)
 
     def make(method):
@@ -580,7 +621,7 @@ def method_runs(problem: AbstractProblem, params=None) -> dict:
 
         return solve
 
-    return {m: make(m) for m in problem.methods}
+    return {m: make(m) for m in problem.check_methods(methods)}
 
 
 def as_json(values: Mapping[str, Any], ok: bool, nullable: bool = False) -> dict:

@@ -4,11 +4,11 @@ command line's `run|compare|sweep|tune PROBLEM` verbs look up.
 The three papers' problems are registered by `visjax.papers`. A user's problem is one line,
 `visjax.studies.register_problem("name", build)`, in code run before the study (for the
 command line: a module named with `visjax --import MODULE`, or an entry point of the group
-`visjax.problems` in the package's metadata, `name = "package.module:build"`).
+`visjax.problems` in the package's metadata, `name = "package.module:build"`). A method
+of your own joins a registered problem with `add_method` (no re-registration).
 """
 
 import dataclasses
-import difflib
 import importlib
 import importlib.util
 import inspect
@@ -17,14 +17,14 @@ import pathlib
 import re
 import sys
 import traceback
-import types
-import typing
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 from ..estimators import MAX_STEPS
 from ..io import output_name
-from ._problem import AbstractProblem
+from ._methods import Method, WithMethods, check_added
+from ._problem import AbstractProblem, Parameter
 
 DEFAULT_RATE_HZ = 1000.0
 """The sample rate a scene is assumed to have, for the step count of its `--duration`,
@@ -52,28 +52,14 @@ class Registered:
             return {"*"}
         return {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
 
-    def problem_classes(self) -> tuple[type, ...]:
-        """The problem classes `build`'s return annotation names (`-> VelocityProblem`, or
-        a union of them); empty when it names none."""
-        try:
-            ret = typing.get_type_hints(self.build).get("return")
-        except Exception:  # an annotation that does not resolve: nothing to learn
-            return ()
-        members = typing.get_args(ret) if isinstance(ret, types.UnionType) else (ret,)
-        classes = tuple(c for c in members if isinstance(c, type))
-        if not classes or not all(issubclass(c, AbstractProblem) for c in classes):
-            return ()
-        return classes
-
-    def check(
-        self, data=None, duration=None, rate_hz=None, variants=None, robust=False, method=None
-    ) -> None:
+    def check(self, data=None, duration=None, rate_hz=None, variants=None, robust=False) -> None:
         """The command line's options for this problem, checked before any work: a
         `ValueError` names an option it does not take (`robust`: its builder's `robust`
         option), an unknown variant, a scene's option given with a data file, a
         `--duration` whose samples (at `rate_hz`, the builder's default rate or
-        `DEFAULT_RATE_HZ`) exceed `visjax.estimators.MAX_STEPS`, and a `method` that no
-        class of `problem_classes()` has (the built problem checks it again)."""
+        `DEFAULT_RATE_HZ`) exceed `visjax.estimators.MAX_STEPS`. A method is checked by the
+        built problem (`AbstractProblem.check_method`: its own methods and those added to
+        it), not here: a builder's annotation does not say what it builds."""
         if data is not None and (duration is not None or rate_hz is not None):
             raise ValueError("--duration and --rate apply to the problem's scene, not to --data")
         if duration is not None:
@@ -87,15 +73,6 @@ class Registered:
                     f"--duration {duration:g} s at {rate:g} Hz makes {duration * rate:.3g} "
                     f"samples, more than a run takes ({MAX_STEPS:.0e}, "
                     "visjax.estimators.MAX_STEPS): give a shorter --duration"
-                )
-        classes = self.problem_classes()
-        if method is not None and classes:
-            known = list(dict.fromkeys(m for c in classes for m in c.methods))
-            if method not in known:
-                close = difflib.get_close_matches(method, known, n=1)
-                hint = f" (did you mean {close[0]!r}?)" if close else ""
-                raise ValueError(
-                    f"problem {self.name!r} has no method {method!r}{hint}; choose from {known}"
                 )
         accepted = self.options()
         given = {"data": data, "duration": duration, "rate_hz": rate_hz, "robust": robust or None}
@@ -133,7 +110,11 @@ class Registered:
                 f"the builder of problem {self.name!r} ({_where(self.build)}) returned "
                 f"{type(problem).__name__}, not a visjax.studies.AbstractProblem."
             )
-        return problem
+        added = tuple(_ADDED.get(self.name, {}).values())
+        if not added:
+            return problem
+        check_added(problem, added, self.name)
+        return WithMethods(problem, added)
 
 
 def build_problems(
@@ -228,6 +209,16 @@ _LOADED = False
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 
 
+def _check_word(what: str, name) -> None:
+    """A name the command line takes as a word: letters, digits, `_` and `-`
+    (`point_depth`), starting with a letter (not an option's `-`)."""
+    if not (isinstance(name, str) and _NAME.fullmatch(name)):
+        raise ValueError(
+            f"a {what}'s name must be letters, digits, '_' or '-', starting with a letter; "
+            f"got {name!r}."
+        )
+
+
 def register_problem(
     name: str,
     build: Callable[..., AbstractProblem],
@@ -242,13 +233,7 @@ def register_problem(
     `build(**options) -> AbstractProblem`, called with the options the user gives (any of
     `data`, `noise_px`, `duration`, `rate_hz`, `variant`); the options it does not accept
     are refused with a clear error. A name already taken is an error unless `replace`."""
-    # a command-line word: letters, digits, `_` and `-` (`point_depth`), starting with a
-    # letter (not an option's `-`)
-    if not (isinstance(name, str) and _NAME.fullmatch(name)):
-        raise ValueError(
-            f"a problem's name must be letters, digits, '_' or '-', starting with a letter; "
-            f"got {name!r}."
-        )
+    _check_word("problem", name)
     if not callable(build):
         raise TypeError(f"`build` of problem {name!r} must be callable.")
     names = {}
@@ -291,7 +276,14 @@ def _load() -> None:
     except Exception:  # a damaged installation's metadata: no plugins, the rest works
         found = []
     for ep in found:
-        if ep.name not in _REGISTRY and ep.name not in _ALIASES:
+        if ep.name in _REGISTRY or ep.name in _ALIASES:  # never one silently over the other
+            own = _REGISTRY[_ALIASES.get(ep.name, ep.name)]
+            _BROKEN[ep.name] = (
+                f"problem {ep.name!r} is both {_where(own.build)} (registered) and the "
+                f"installed plugin {ep.value!r} (entry point of visjax.problems); rename the "
+                "plugin's entry point"
+            )
+        else:
             _PENDING.setdefault(ep.name, ep)
 
 
@@ -317,8 +309,11 @@ def _first_line(error: Exception) -> str:
 
 def registered(name: str) -> Registered:
     """The registry entry of `name` (or of an alias). **Raises:** `ValueError` listing the
-    registered names, or saying why an installed plugin of that name failed to load."""
+    registered names, or saying why an installed plugin of that name failed to load (or
+    clashes with a registered problem)."""
     _load()
+    if name in _BROKEN:
+        raise ValueError(_BROKEN[name])
     if name in _ALIASES:
         warnings.warn(
             f"the problem name {name!r} is deprecated: it is now {_ALIASES[name]!r}",
@@ -338,6 +333,77 @@ def problem_names() -> list[str]:
     """The registered problems' names (with the installed plugins', loaded or not)."""
     _load()
     return sorted({*_REGISTRY, *_PENDING, *_BROKEN})
+
+
+_ADDED: dict[str, dict[str, Method]] = {}  # problem name -> method name -> Method
+
+
+def add_method(
+    problem: str,
+    name: str,
+    solve: Callable[..., Any],
+    parameters: Mapping[str, Parameter] | None = None,
+    *,
+    like: str | None = None,
+    metrics: Callable[..., Any] | None = None,
+    replace: bool = False,
+) -> Method:
+    """Add a method of your own to the registered problem `problem` (a name or an alias):
+    every later `studies.problem(problem)` and command (`visjax run|compare|sweep|tune
+    PROBLEM`, from a module given to `--import`) has it beside the problem's own methods,
+    on the same draws, scored by the same metrics. No subclass, no re-registration.
+
+    **Arguments:**
+
+    - `name`: the method's name (letters, digits, `_`, `-`), not one of the problem's own.
+    - `solve`: `(problem, params, inputs) -> solution`, pure JAX: `problem` is the built
+        problem (its fields: sample times, camera, truth, as its documentation states),
+        `params` every parameter (defaults filled in: the problem's and this method's),
+        `inputs` one noisy draw (`problem.inputs(key)`). The solution carries a `result`
+        (a visjax `RESULTS` item) and must not raise for a value (`throw=False` inside).
+    - `parameters`: name -> `Parameter`, this method's tunable parameters (not named like
+        the problem's own); swept and tuned like the problem's.
+    - `like`: one of the problem's methods whose solutions have the same form (for the
+        velocity problem, `"ekf"`: `ts`, `outputs.v_hat`): the problem scores, draws and
+        times it as that method. Or `metrics`: `(problem, solution) -> {name: array}`
+        with the problem's metric names. One of the two is needed.
+    - `replace`: replace a method of that name added before (else an error).
+
+    **Returns:** the `Method`. **Raises:** `ValueError` for an unknown problem, a taken
+    name, a bad argument; a clash with the built problem's own methods or parameters is
+    refused when the problem is built (it may depend on its options)."""
+    entry = registered(problem)
+    _check_word("method", name)
+    if not callable(solve):
+        raise TypeError(f"`solve` of method {name!r} must be callable; got {solve!r}.")
+    if (like is None) == (metrics is None):
+        raise ValueError(
+            f"method {name!r}: give exactly one of `like` (the problem's method whose "
+            "solutions it resembles, scored the same) and `metrics` (your own scoring)."
+        )
+    if metrics is not None and not callable(metrics):
+        raise TypeError(f"`metrics` of method {name!r} must be callable; got {metrics!r}.")
+    specs = dict(parameters or {})
+    bad = [k for k, v in specs.items() if not isinstance(v, Parameter)]
+    if bad:
+        raise TypeError(f"method {name!r}: parameters {bad} must be visjax.studies.Parameter.")
+    taken = _ADDED.setdefault(entry.name, {})
+    if name in taken and not replace:
+        raise ValueError(
+            f"problem {entry.name!r} has a method {name!r} added by {taken[name].where} "
+            "already (replace=True)."
+        )
+    method = Method(name, solve, tuple(specs.items()), like, metrics, _where(solve))
+    taken[name] = method
+    return method
+
+
+def remove_method(problem: str, name: str) -> None:
+    """Remove a method added to `problem` (`add_method`); `ValueError` if there is none."""
+    entry = registered(problem)
+    if name not in _ADDED.get(entry.name, {}):
+        raise ValueError(f"problem {entry.name!r} has no added method {name!r}.")
+    del _ADDED[entry.name][name]
 
 
 def problem(name: str, **options) -> AbstractProblem:

@@ -705,9 +705,11 @@ def held_out(
     points: Mapping[str, Mapping[str, Any]],
     keys,
     *,
+    method: str | None = None,
     study: Study | None = None,
 ) -> dict[str, dict]:
-    """Named parameter points of `problem` measured on noise keys no study has seen: the
+    """Named parameter points of `problem` (of its `method`, default the estimator)
+    measured on noise keys no study has seen: the
     honest figure once a sweep or a tuning chose a point on keys of its own (what `visjax
     sweep` and `visjax tune` report, on the seeds after theirs).
 
@@ -740,7 +742,8 @@ def held_out(
         raise ValueError("every point must name the same parameters (the others: defaults).")
     params = {k: np.stack([f[k] for f in full]) for k in full[0]}
     study = Study() if study is None else study
-    table = sweep(problem, params, keys, study=Study(chunk=study.chunk, mesh=study.mesh))
+    study = Study(chunk=study.chunk, mesh=study.mesh)
+    table = sweep(problem, params, keys, method=method, study=study)
     out = {}
     for i, n in enumerate(names):
         rows = table[table["point"] == i]

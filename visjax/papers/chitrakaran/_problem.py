@@ -100,6 +100,7 @@ class VelocityProblem(AbstractProblem):
     trivial_label = "zero velocity"
     data_parameters = ("noise_px",)
     grid = "K_scale=1e-3:1e1:9,rho_scale=1e-3:1e1:9"
+    own_parameters = {m: () for m in ("batch", "batch_window", "ekf")}
 
     ts: Float[ArrayLike, " n"]  # the sample times, s
     clean: Float[ArrayLike, "n m 2"]  # the noise-free pixels of the m features

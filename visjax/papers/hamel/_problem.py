@@ -87,6 +87,7 @@ class HomographyProblem(AbstractProblem):
     label: ClassVar[str] = "RMS of |H_hat H^-1 - I| over the second half (-)"
     trivial_label: ClassVar[str] = "the identity (the reference image's homography)"
     grid: ClassVar[str] = "k_P=3:200:5"
+    own_parameters: ClassVar[dict] = {"estimator": ("k_P",), "dlt": (), "ransac": ()}
     title: ClassVar[str] = "homography of a planar target (Hamel et al.)"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 

@@ -55,6 +55,7 @@ class MovingPointProblem(AbstractProblem):
     trivial_label = "the initial depth guess"
     data_parameters = ("noise_px",)
     grid = "K_scale=0.1:10:7,Y_scale=0.1:10:7"
+    own_parameters = {m: () for m in ("batch", "batch_window", "ekf")}
 
     ts: Float[ArrayLike, " n"]  # the observer's samples (the frames held at 1 kHz for a scene)
     frame_index: Int[ArrayLike, " n"]  # the frame held at each of `ts`

@@ -88,6 +88,7 @@ class StaticPointsProblem(AbstractProblem):
     trivial_label = "the initial guess"
     data_parameters = ("noise_px",)
     grid = "alpha_scale=0.1:10:5,gamma_scale=0.1:10:5"
+    own_parameters = {m: () for m in ("batch", "batch_window", "ekf")}
 
     ts: Float[ArrayLike, " n"]
     R_b: Float[ArrayLike, "n 3 3"]

@@ -88,6 +88,7 @@ class PointDepthProblem(AbstractProblem):
     trivial_label: ClassVar[str] = "the initial depth guess"
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
+    own_parameters: ClassVar[dict] = {"least_squares": (), "ekf": ("chi0",)}
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
     data_parameters: ClassVar[tuple[str, ...]] = ("noise_px",)
 
