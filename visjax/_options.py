@@ -142,6 +142,9 @@ def verb(sub, name, help, *, seeds, noise, grid):
     if name != "run":
         which = "every one" if name == "compare" else "the estimator; each in turn"
         arg(p, "--methods", method_names, None, f"a,b,c: the methods (default {which})")
+    if name == "compare":
+        tex = "also write the statistics tables as comparison.md or .tex (repeatable)"
+        arg(p, "--table", None, None, tex, choices=("md", "tex"), action="append", dest="tables")
     if grid:
         arg(p, "--grid", grid_spec, None, 'e.g. "K_scale=1e-2:1e1:8,rho_scale=0.1/1"')
         arg(p, "--chunk", count, 64, "runs per vmap call (default 64)")

@@ -58,6 +58,7 @@ class Request:
     out: str | None = None
     quiet: bool = False
     formats: Sequence[str] = ("png",)
+    tables: Sequence[str] = ()
     options: dict | None = None
 
     def __post_init__(self):
@@ -95,18 +96,11 @@ def check_study(r: Request) -> list:
     """The problems, built once, for the command (`built=`), its methods checked on them,
     and a study's size before any work (`studies.check_study`: runs, grid, memory);
     `Refused`, one line."""
-    if r.command == "run":
-        built = r.problems()
-        for tag, p in built:
-            try:
-                p.check_method(r.method)
-            except ValueError as e:
-                raise Refused(f"run {r.problem}{f' [{tag}]' if tag else ''}: {e}") from None
-        return built
     return studies.check_study(
         r.command, registered(r.problem).name, r.problems, spec=r.grid, seeds=r.seeds,
         study=Study(chunk=r.chunk, shard=r.job), steps=r.steps if r.command == "tune" else 0,
-        variants=len(r.variants) if r.variants else 1, methods=r.methods,
+        variants=len(r.variants) if r.variants else 1,
+        methods=[r.method] if r.command == "run" else r.methods,
     )  # fmt: skip
 
 
@@ -187,11 +181,12 @@ def run_command(r: Request, built=None) -> dict:
 
 
 def compare_command(r: Request, built=None) -> dict:
-    """`visjax compare PROBLEM`: every method of the problem on identical noisy inputs
-    (`studies.compare`, `seeds` seeds), refused after the first seed when the whole would
-    pass `max_hours`. Prints the medians per method; writes `summary.json` (kind
-    `compare`: a record per method and seed), `records.parquet`, `records.csv` and
-    `comparison.<format>` (accuracy and latency with their spread over seeds)."""
+    """`visjax compare PROBLEM`: every method of the problem (or `methods`) on identical
+    noisy inputs (`studies.compare`, `seeds` seeds), refused after the first seed when the
+    whole would pass `max_hours`. Prints the medians per method, their intervals and the
+    paired comparisons (`Comparison.statistics`); writes `summary.json` (kind `compare`: a
+    record per method and seed, `statistics`), `records.parquet`, `records.csv`,
+    `comparison.<format>` and `comparison.md|tex` (`tables`)."""
     dropped = _dropped(r)
 
     def one(p, head, folder):
@@ -212,15 +207,18 @@ def compare_command(r: Request, built=None) -> dict:
         worse, judged = studies.judge_records(p, records)
         if judged is not None:
             body["quality"] = judged
-        table = records.medians_table(p.metric, worse)
-        print(table.to_string(index=False, na_rep="-", float_format="{:.4g}".format))
+        body["statistics"] = stats = records.statistics(p.metric, seed=r.seed)
+        tables = (records.medians_table(p.metric, worse), *studies.statistics_tables(stats))
+        for t in tables:
+            print(t.to_string(index=False, na_rep="-", float_format="{:.4g}".format))
         if worse is not None and any(worse.values()):
-            print(
-                f"{head}warning: {sum(worse.values())} run(s) no better than "
-                f"{judged['trivial_estimate']} ({p.metric} {judged['trivial']:.4g}; column above)"
-            )
+            what = f"{judged['trivial_estimate']} ({p.metric} {judged['trivial']:.4g})"
+            print(f"{head}warning: {sum(worse.values())} run(s) no better than {what}")
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
+            for form in r.tables:  # the last two tables, for a paper
+                text = "\n".join(studies.table_text(t, form) for t in tables[1:])
+                (folder / f"comparison.{form}").write_text(text)
             table = records.to_pandas()
             table.to_parquet(folder / "records.parquet", index=False)
             table.to_csv(folder / "records.csv", index=False)

@@ -177,10 +177,22 @@ def test_a_method_from_an_imported_module_in_the_current_folder(toy, tmp_path, m
     cmd = ["--import", "my_method"]
     out = tmp_path / "compare"
     argv = [*cmd, "compare", NAME, "--methods", "trimmed,first", "--seeds", "2", "--noise", "0.3"]
-    assert main([*argv, "--quiet", "--out", str(out)]) == 0
+    tables = ["--table", "md", "--table", "tex"]
+    assert main([*argv, *tables, "--quiet", "--out", str(out)]) == 0
     records = pd.read_parquet(out / "records.parquet")
     assert list(records["method"]) == ["trimmed", "first"] * 2
-    assert read_summary(out / "summary.json")["settings"]["methods"] == ["trimmed", "first"]
+    summary = read_summary(out / "summary.json")
+    assert summary["settings"]["methods"] == ["trimmed", "first"]
+    # the statistics: each method's median with its interval, the pair's paired test
+    stats = summary["statistics"]
+    err = records.groupby("method")["error"].median()
+    for m in ("trimmed", "first"):
+        x = stats["methods"][m]
+        assert x["median"] == pytest.approx(err[m]) and x["low"] <= x["median"] <= x["high"]
+    (pair,) = stats["pairs"]
+    assert (pair["a"], pair["b"], pair["n"]) == ("trimmed", "first", 2)
+    assert "| trimmed - first |" in (out / "comparison.md").read_text()
+    assert (out / "comparison.tex").read_text().count(r"\begin{tabular}") == 2
     out = tmp_path / "sweep"
     argv = [*cmd, "sweep", NAME, "--methods", "trimmed", "--grid", "width=0.2/0.8", "--seeds", "2"]
     assert main([*argv, "--quiet", "--out", str(out)]) == 0

@@ -207,6 +207,14 @@ SUMMARIES = {
         "seeds": ("int", "noise seeds"),
         "problem_settings": ("dict", "the problem's scenario and methods"),
         "records": ("list[dict]", "one per method and seed (the rows of `records.parquet`)"),
+        "statistics?": (
+            "dict",
+            "`Comparison.statistics` of the headline `metric`: per method (`methods`) the "
+            "`median` over the successful runs, its 95% bootstrap interval (`low`, `high`), "
+            "`n`, `runs`, `failure_rate` and each result code's count (`results`); per pair "
+            "(`pairs`: `a`, `b`) the `median_difference` a - b on the seeds both succeeded "
+            "on, its interval and the Wilcoxon signed-rank `pvalue`",
+        ),
         "dropped_fraction?": _DROPPED_STUDY,
         "quality?": (
             "dict",

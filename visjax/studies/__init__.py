@@ -14,6 +14,8 @@ from ._compare import (
     Comparison as Comparison,
     StudyTooLong as StudyTooLong,
     compare as compare,
+    statistics_tables as statistics_tables,
+    table_text as table_text,
 )
 from ._executors import RayExecutor as RayExecutor
 from ._methods import Method as Method, WithMethods as WithMethods
@@ -84,6 +86,13 @@ from ._reproductions import (
     registered_reproduction as registered_reproduction,
     reproduction_names as reproduction_names,
     reproduction_row as reproduction_row,
+)
+from ._stats import (
+    Interval as Interval,
+    Paired as Paired,
+    bootstrap_interval as bootstrap_interval,
+    paired_comparison as paired_comparison,
+    wilcoxon_signed_rank as wilcoxon_signed_rank,
 )
 from ._study import (
     Interrupted as Interrupted,

@@ -13,6 +13,7 @@ import numpy as np
 
 from .._results import RESULTS, result_names
 from ._problem import AbstractProblem, as_json, method_runs
+from ._stats import bootstrap_interval, paired_comparison
 from ._study import Result, Study, seed_keys, study_of
 
 
@@ -65,6 +66,122 @@ class Comparison(Result, list):
             table["worse than trivial"] = table["method"].map(worse)
         names = {"metric": f"{metric} (median)", "std": f"predicted {std}"}
         return table.rename(columns=names | {"latency": "latency/sample (s)"})
+
+    def statistics(
+        self, metric: str, *, level: float = 0.95, resamples: int = 2000, seed: int = 0
+    ) -> dict:
+        """The comparison's uncertainty over its keys (`visjax.studies._stats`): per method
+        the median of `metric` over the successful runs with its percentile-bootstrap
+        interval (`bootstrap_interval`), the runs, the failure rate and each result code's
+        count; for each pair of methods (in the records' order) the paired comparison on
+        the keys where both succeeded (`paired_comparison`: the median difference `a - b`,
+        its interval, the Wilcoxon signed-rank p-value). Numbers as JSON (`None` for
+        NaN); the resamples drawn from `seed`."""
+        names = list(dict.fromkeys(r["method"] for r in self))
+        seeds = sorted({r["seed"] for r in self})
+        value = {m: np.full(len(seeds), np.nan) for m in names}
+        codes: dict[str, dict[str, int]] = {m: {} for m in names}
+        for r in self:
+            codes[r["method"]][r["result"]] = codes[r["method"]].get(r["result"], 0) + 1
+            x = r.get(metric)
+            if r["result"] == "successful" and x is not None and np.ndim(x) == 0:
+                value[r["method"]][seeds.index(r["seed"])] = float(x)
+        key = jax.random.key(seed)
+        opts = {"level": level, "resamples": resamples}
+        methods = {}
+        for i, m in enumerate(names):
+            ci = bootstrap_interval(jax.random.fold_in(key, i), value[m], **opts)
+            runs = sum(codes[m].values())
+            failed = runs - codes[m].get("successful", 0)
+            methods[m] = {
+                "median": _number(ci.value), "low": _number(ci.low), "high": _number(ci.high),
+                "n": int(ci.n), "runs": runs, "failure_rate": failed / runs, "results": codes[m],
+            }  # fmt: skip
+        pairs = []
+        for i, a in enumerate(names):
+            for j, b in enumerate(names[i + 1 :], i + 1):
+                k = jax.random.fold_in(key, 1000 + len(names) * i + j)
+                c = paired_comparison(k, value[a], value[b], **opts)
+                pairs.append(
+                    {
+                        "a": a,
+                        "b": b,
+                        "median_difference": _number(c.difference),
+                        "low": _number(c.low),
+                        "high": _number(c.high),
+                        "pvalue": _number(c.pvalue),
+                        "n": int(c.n),
+                    }  # fmt: skip
+                )
+        return {"metric": metric, **opts, "seed": seed, "methods": methods, "pairs": pairs}
+
+
+def statistics_tables(stats: Mapping[str, Any]):
+    """`Comparison.statistics` as two pandas tables, as `visjax compare` prints and exports
+    them: per method (median, interval, successful runs, failure rate, the codes of the
+    failures) and per pair (median difference, interval, p-value, pairs)."""
+    import pandas as pd
+
+    pct = f"{100 * stats['level']:g}%"
+    rows = []
+    for m, x in stats["methods"].items():
+        failures = {k: v for k, v in x["results"].items() if k != "successful"}
+        rows.append(
+            {
+                "method": m,
+                f"{stats['metric']} median": x["median"],
+                f"{pct} CI low": x["low"],
+                f"{pct} CI high": x["high"],
+                "n": x["n"],
+                "failure rate": x["failure_rate"],
+                "failures": ", ".join(f"{k} {v}" for k, v in failures.items()) or "-",
+            }  # fmt: skip
+        )
+    pairs = [
+        {
+            "a - b": f"{x['a']} - {x['b']}",
+            "median difference": x["median_difference"],
+            f"{pct} CI low": x["low"],
+            f"{pct} CI high": x["high"],
+            "Wilcoxon p": x["pvalue"],
+            "pairs": x["n"],
+        }  # fmt: skip
+        for x in stats["pairs"]
+    ]
+    return pd.DataFrame(rows), pd.DataFrame(pairs)
+
+
+def table_text(table, form: str) -> str:
+    """A table as Markdown (`"md"`) or LaTeX (`"tex"`, a `tabular` for a paper), numbers
+    to 4 significant digits, `-` for a missing one."""
+    if form not in ("md", "tex"):
+        raise ValueError(f"a table's format must be 'md' or 'tex'; got {form!r}.")
+
+    def cell(v):
+        if v is None or (isinstance(v, float) and not np.isfinite(v)):
+            return "-"
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+    head = [str(c) for c in table.columns]
+    body = [[cell(v) for v in row] for row in table.itertuples(index=False)]
+    if form == "md":
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in body]) + "\n"
+
+    def tex(text):
+        for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("_", r"\_")):
+            text = text.replace(a, b)
+        return text
+
+    lines = [r"\begin{tabular}{" + "l" + "r" * (len(head) - 1) + "}", r"\hline"]
+    lines += [" & ".join(tex(h) for h in head) + r" \\", r"\hline"]
+    lines += [" & ".join(tex(c) for c in r) + r" \\" for r in body]
+    return "\n".join(lines + [r"\hline", r"\end{tabular}"]) + "\n"
+
+
+def _number(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
 
 
 def _largest(value):

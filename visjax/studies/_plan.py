@@ -119,7 +119,16 @@ def check_study(
     again, a lower bound of the memory against `available_memory()`, of the job's slice
     with `study.shard`); `methods` (the selected methods: each checked, and a grid axis
     none of them uses refused; default: every method for compare, the estimator for a
-    sweep or a tuning). **Raises:** `Refused`, one line. **Returns:** the built problems."""
+    sweep or a tuning); `kind="run"`: only the method (`methods=[name or None]`) checked.
+    **Raises:** `Refused`, one line. **Returns:** the built problems."""
+    if kind == "run":  # one run of one method: the method checked on the built problems
+        built = build()
+        for tag, p in built:
+            try:
+                p.check_methods(methods)
+            except ValueError as e:
+                raise Refused(str(e) if tag is None else f"[{tag}] {e}") from None
+        return built
     count = 1 if spec is None else grid_size(spec)
     if count is not None:
         what = f"{count} grid points x {seeds} seeds" if spec else f"{seeds} seeds"
