@@ -18,7 +18,7 @@ from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 from matplotlib.ticker import FixedLocator  # noqa: E402
 
-from visjax import plots  # noqa: E402
+from visjax import plots, studies  # noqa: E402
 
 N, S = 120, 4
 UNIT = re.compile(r"\[[^\]]+\]")
@@ -175,8 +175,15 @@ def _transient(**kw):
     return plots.plot_transient(t, measured, ideal, **kw)
 
 
+def _noise_study(**kw):
+    by = [studies.Comparison(_records()).statistics("err", resamples=200, seed=i) for i in range(3)]
+    stats = {"metric": "err", "noise_levels": [0.1, 0.5, 1.0], "by_noise": by}
+    return plots.plot_noise_study(stats, label="final position error (m)", **kw)
+
+
 FIGURES = {
     "transient": _transient,
+    "noise_study": _noise_study,
     "velocity": _velocity,
     "velocity_no_truth": lambda **kw: _velocity(truth=False, **kw),
     "structure": _structure,
@@ -193,6 +200,7 @@ FIGURES = {
 }
 FUNCTIONS = (  # one case per plot function
     "transient",
+    "noise_study",
     "velocity",
     "structure",
     "camera_velocity",
@@ -229,8 +237,25 @@ def test_every_plot_function_is_exercised():
         "plot_sweep",
         "plot_tune_history",
         "plot_transient",
+        "plot_noise_study",
     }
     assert public == used
+
+
+def test_noise_study_draws_the_medians_their_intervals_and_the_failure_rate():
+    fig = _noise_study()
+    try:
+        fig.canvas.draw()
+        _check_paper_figure(fig, "noise_study")
+        left, right = fig.axes[:2]
+        stats = studies.Comparison(_records()).statistics("err", resamples=200, seed=0)
+        line = left.get_lines()[0]  # the first method's medians at the three levels
+        np.testing.assert_allclose(line.get_xdata(), [0.1, 0.5, 1.0])
+        assert line.get_ydata()[0] == stats["methods"]["observer"]["median"]
+        ekf = right.get_lines()[-1].get_ydata()  # the EKF failed on seed 0 of S
+        np.testing.assert_allclose(ekf[0], 100 / S)
+    finally:
+        plt.close(fig)
 
 
 def _shows_data(ax):

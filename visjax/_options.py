@@ -104,10 +104,18 @@ def arg(p, flag, kind=None, default=None, help=None, **kw):
 FORCE = "replace another command's results in --out (a sweep: a finished one)"
 
 
-def common(p, out=OUT, noise=None, seed=None, seeds=None, data=None, fmt=True):
-    """The shared vocabulary: --noise, --seed, --seeds, --data, --out, --quiet, --format."""
+def noise_levels(text: str) -> float | tuple[float, ...]:
+    """`--noise 0.5`, or (compare) `--noise 0,0.1,0.5,1`: levels, each at least 0."""
+    levels = tuple(nonnegative(t) for t in text.split(","))
+    return levels[0] if len(levels) == 1 else levels
+
+
+def common(p, out=OUT, noise=None, seed=None, seeds=None, data=None, fmt=True, levels=False):
+    """The shared vocabulary: --noise (`levels`: a list too), --seed, --seeds, --data, --out,
+    --quiet, --format."""
     if noise is not None:
-        arg(p, "--noise", nonnegative, noise, f"pixel noise sigma, px (default {noise:g})")
+        kind, more = (noise_levels, "; a,b,c: each") if levels else (nonnegative, "")
+        arg(p, "--noise", kind, noise, f"pixel noise sigma, px (default {noise:g}{more})")
     if seed is not None:
         arg(p, "--seed", seed_number, 0, seed)
     if seeds is not None:
@@ -133,7 +141,15 @@ def verb(sub, name, help, *, seeds, noise, grid):
     p.add_argument("problem", help=f"{', '.join(names)}, their aliases, or yours (--import)")
     held = "; then as many held-out seeds" if grid else ""
     seeds = None if seeds is None else (seeds, f"noise seeds (default {seeds}){held}")
-    common(p, "summary.json, tables and figures", noise, FIRST, seeds, OWN_DATA)
+    common(
+        p,
+        "summary.json, tables and figures",
+        noise,
+        FIRST,
+        seeds,
+        OWN_DATA,
+        levels=name == "compare",
+    )
     arg(p, "--duration", positive, None, "seconds of the problem's scene")
     arg(p, "--rate", positive, None, "sample rate of the scene, Hz (if it has one)")
     arg(p, "--set", None, None, "a variant (moving_point: I.1 ... II.3)", action="append")

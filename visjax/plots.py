@@ -847,6 +847,48 @@ def plot_comparison(
         return _finish(fig, title, path, formats)
 
 
+def plot_noise_study(stats, *, label, title=None, path=None, formats=("png",)):
+    """`visjax compare --noise 0,0.1,...`, the figure of an estimation paper: per method
+    (one colour each) the median of the headline metric over the successful seeds against
+    the noise level, its 95% bootstrap interval as error bars (left, log axis), and its
+    failure rate (right).
+
+    **Arguments:** `stats` (`studies.Comparison.statistics` of a comparison over noise
+    levels: `noise_levels`, `by_noise`); `label` the metric's axis label with its unit;
+    `title`, `path`, `formats` as in the module's docstring. **Returns:** the `Figure`."""
+    formats = figure_formats(formats)
+    levels = np.asarray(stats["noise_levels"], float)
+    methods = list(dict.fromkeys(m for s in stats["by_noise"] for m in s["methods"]))
+    plt = _pyplot(path)
+    with _style():
+        fig, axes = _subplots(plt, 1, 2, DOUBLE_COLUMN, 2.6)
+        axes = axes[0]
+        for i, method in enumerate(methods):
+            rows = [s["methods"].get(method, {}) for s in stats["by_noise"]]
+
+            def get(k, rows=rows):
+                return np.array([np.nan if r.get(k) is None else r[k] for r in rows], float)
+
+            med, lo, hi = get("median"), get("low"), get("high")
+            err = np.vstack(
+                [med - np.where(np.isfinite(lo), lo, med), np.where(np.isfinite(hi), hi, med) - med]
+            )
+            color = f"C{i % 10}"
+            axes[0].errorbar(
+                levels, med, yerr=err, fmt="o-", color=color, capsize=2, label=method, gid="median"
+            )
+            axes[1].plot(levels, 100 * get("failure_rate"), "o-", color=color, gid="failures")
+        axes[0].set_yscale("log")
+        axes[0].set_ylabel(_unit_label(label))
+        axes[1].set_ylabel("failed runs [%]")
+        axes[1].set_ylim(-3, 103)
+        for ax in axes:
+            ax.set_xlabel("pixel noise sigma [px]")
+            ax.grid(True, which="major", alpha=0.3)
+        _legend(fig, axes[0].get_legend_handles_labels()[0], ncol=min(len(methods), 5))
+        return _finish(fig, title, path, formats)
+
+
 def plot_sweep(
     summary,
     metric,

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import studies
 from .io import command_summary, dropped_report, output_name, user_path
-from .plots import plot_comparison, plot_sweep, plot_tune_history, save_figure
+from .plots import plot_comparison, plot_noise_study, plot_sweep, plot_tune_history, save_figure
 from .report import RunFailed
 from .studies import Refused, Study, innovation_line, quality_line, registered
 
@@ -38,7 +38,7 @@ class Request:
     method: str | None = None
     methods: Sequence[str] | None = None
     data: str | Path | None = None
-    noise: float = 0.1
+    noise: float | Sequence[float] = 0.1  # compare: several levels
     seed: int = 0
     seeds: int = 1
     duration: float | None = None
@@ -81,7 +81,7 @@ class Request:
     def problems(self) -> list:
         """The problems the command runs, each variant's (`studies.build_problems`)."""
         return studies.build_problems(
-            self.problem, data=self.data, noise_px=self.noise, duration=self.duration,
+            self.problem, data=self.data, noise_px=np.max(self.noise), duration=self.duration,
             rate_hz=self.rate, variants=self.variants, every=self.command in ("sweep", "tune"),
             robust=self.robust, options=self.options,
         )  # fmt: skip
@@ -192,7 +192,10 @@ def compare_command(r: Request, built=None) -> dict:
     def one(p, head, folder):
         try:
             study = Study(progress=not r.quiet, max_seconds=r.max_hours * 3600)
-            records = studies.compare(p, r.keys(), methods=r.methods, study=study)
+            levels = r.noise if np.ndim(r.noise) else None
+            records = studies.compare(
+                p, r.keys(), methods=r.methods, noise_levels=levels, study=study
+            )
         except studies.StudyTooLong as e:
             where = f"compare {r.problem} {head}".strip()
             raise Refused(f"{where}: {e}: use fewer --seeds or raise --max-hours") from None
@@ -208,7 +211,8 @@ def compare_command(r: Request, built=None) -> dict:
         if judged is not None:
             body["quality"] = judged
         body["statistics"] = stats = records.statistics(p.metric, seed=r.seed)
-        tables = (records.medians_table(p.metric, worse), *studies.statistics_tables(stats))
+        medians = () if levels else (records.medians_table(p.metric, worse),)
+        tables = (*medians, *studies.statistics_tables(stats))
         for t in tables:
             print(t.to_string(index=False, na_rep="-", float_format="{:.4g}".format))
         if worse is not None and any(worse.values()):
@@ -216,16 +220,15 @@ def compare_command(r: Request, built=None) -> dict:
             print(f"{head}warning: {sum(worse.values())} run(s) no better than {what}")
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
-            for form in r.tables:  # the last two tables, for a paper
-                text = "\n".join(studies.table_text(t, form) for t in tables[1:])
+            for form in r.tables:  # the statistics' two tables, for a paper
+                text = "\n".join(studies.table_text(t, form) for t in tables[-2:])
                 (folder / f"comparison.{form}").write_text(text)
-            table = records.to_pandas()
-            table.to_parquet(folder / "records.parquet", index=False)
-            table.to_csv(folder / "records.csv", index=False)
-            plot_comparison(
-                records, lambda x, k=p.metric: np.nan if x[k] is None else x[k], label=label,
-                title=p.title, path=folder / "comparison.png", formats=r.formats,
-            )  # fmt: skip
+            studies.save_table(records.to_pandas(), folder, "records")
+            fig = {"label": label, "title": p.title, "formats": r.formats}
+            if levels:  # the error against the noise level, with its interval, per method
+                plot_noise_study(stats, path=folder / "noise.png", **fig)
+            accuracy = lambda x, k=p.metric: np.nan if x[k] is None else x[k]  # noqa: E731
+            plot_comparison(records, accuracy, path=folder / "comparison.png", **fig)
         return "compare", body, folder
 
     return _each(r, built or r.problems(), one)

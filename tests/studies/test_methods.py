@@ -118,6 +118,9 @@ def test_an_added_method_is_studied_like_the_problems_own(toy):
     assert len(found.sweep) == 6 and set(found.best["params"]) == {"width"}
     with pytest.raises(studies.Refused, match=r"'gain' is used by \['estimator'\], not by"):
         studies.sweep_then_hold_out(p, "gain=0.1/1", keys, keys + 3, method="trimmed")
+    fn = studies.FunctionProblem(lambda params, key: Estimate(0.0, RESULTS.successful), dict)
+    with pytest.raises(ValueError, match="noise levels need `noise_px` among its data"):
+        studies.compare(fn, keys, noise_levels=[0.1])
     with pytest.raises(ValueError, match=r"unknown method 'trimed' \(did you mean 'trimmed'\?\)"):
         p.check_method("trimed")
 
@@ -198,6 +201,18 @@ def test_a_method_from_an_imported_module_in_the_current_folder(toy, tmp_path, m
     assert main([*argv, "--quiet", "--out", str(out)]) == 0
     summary = read_summary(out / "summary.json")
     assert summary["method"] == "trimmed" and set(summary["best"]["params"]) == {"width"}
+    # accuracy against noise: the comparison at each level, one figure
+    out = tmp_path / "noise"
+    argv = [*cmd, "compare", NAME, "--noise", "0,0.3,1", "--seeds", "3", "--table", "md"]
+    assert main([*argv, "--quiet", "--out", str(out)]) == 0
+    stats = read_summary(out / "summary.json")["statistics"]
+    assert stats["noise_levels"] == [0.0, 0.3, 1.0] and len(stats["by_noise"]) == 3
+    medians = [s["methods"]["estimator"]["median"] for s in stats["by_noise"]]
+    assert medians[0] < 1e-12 < medians[1] < medians[2]  # exact without noise, then growing
+    records = pd.read_parquet(out / "records.parquet")
+    assert sorted(set(records["noise_px"])) == [0.0, 0.3, 1.0] and len(records) == 3 * 3 * 3
+    assert (out / "noise.png").stat().st_size > 10_000
+    assert "| noise_px | method |" in (out / "comparison.md").read_text()
     capsys.readouterr()
     for argv, said in (
         ([*cmd, "sweep", NAME, "--methods", "trimmed", "--grid", "gain=0.2/0.8"], "'gain' is used"),

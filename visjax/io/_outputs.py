@@ -203,7 +203,7 @@ SUMMARIES = {
     "compare": {
         "problem": ("str", "the registered problem's name (as given on the command line)"),
         "data": ("str|null", "the data file, or `null` for the paper's scenario"),
-        "noise_px": ("float", "pixel noise sigma, px"),
+        "noise_px": ("float|list[float]", "pixel noise sigma, px (`--noise a,b,c`: the levels)"),
         "seeds": ("int", "noise seeds"),
         "problem_settings": ("dict", "the problem's scenario and methods"),
         "records": ("list[dict]", "one per method and seed (the rows of `records.parquet`)"),

@@ -76,7 +76,18 @@ class Comparison(Result, list):
         count; for each pair of methods (in the records' order) the paired comparison on
         the keys where both succeeded (`paired_comparison`: the median difference `a - b`,
         its interval, the Wilcoxon signed-rank p-value). Numbers as JSON (`None` for
-        NaN); the resamples drawn from `seed`."""
+        NaN); the resamples drawn from `seed`. Records over noise levels (a `noise_px`
+        each): `noise_levels` and `by_noise`, the same per level."""
+        levels = sorted({r["noise_px"] for r in self if "noise_px" in r})
+        if levels:  # a comparison over noise levels (`compare(..., noise_levels=)`)
+            by = [
+                Comparison(
+                    _without(r, "noise_px") for r in self if r.get("noise_px") == x
+                ).statistics(metric, level=level, resamples=resamples, seed=seed)
+                for x in levels
+            ]
+            opts = {"level": level, "resamples": resamples, "seed": seed}
+            return {"metric": metric, **opts, "noise_levels": levels, "by_noise": by}
         names = list(dict.fromkeys(r["method"] for r in self))
         seeds = sorted({r["seed"] for r in self})
         value = {m: np.full(len(seeds), np.nan) for m in names}
@@ -122,6 +133,14 @@ def statistics_tables(stats: Mapping[str, Any]):
     failures) and per pair (median difference, interval, p-value, pairs)."""
     import pandas as pd
 
+    if "by_noise" in stats:  # one block per noise level, the level its first column
+        parts = [statistics_tables(s) for s in stats["by_noise"]]
+        return tuple(
+            pd.concat([t[i].assign(noise_px=x) for t, x in zip(parts, stats["noise_levels"])])
+            .pipe(lambda t: t[["noise_px", *t.columns[:-1]]])
+            .reset_index(drop=True)
+            for i in (0, 1)
+        )
     pct = f"{100 * stats['level']:g}%"
     rows = []
     for m, x in stats["methods"].items():
@@ -179,6 +198,10 @@ def table_text(table, form: str) -> str:
     return "\n".join(lines + [r"\hline", r"\end{tabular}"]) + "\n"
 
 
+def _without(record: Mapping, key: str) -> dict:
+    return {k: v for k, v in record.items() if k != key}
+
+
 def _number(x) -> float | None:
     x = float(x)
     return x if np.isfinite(x) else None
@@ -197,6 +220,7 @@ def compare(
     *old: Any,
     params: Mapping[str, Any] | None = None,
     methods: Sequence[str] | None = None,
+    noise_levels: Sequence[float] | None = None,
     study: Study | None = None,
     **legacy: Any,
 ) -> Comparison:
@@ -218,6 +242,8 @@ def compare(
         typed PRNG keys (the records' `seed` is then the index).
     - `params`: name -> value, overriding the defaults for every method.
     - `methods`: the methods to run, in this order (default: every one).
+    - `noise_levels`: pixel noise levels (px): the comparison at each (the problem's data
+        parameter `noise_px`, the same keys), each record tagged with its `noise_px`.
     - `study`: a `Study`: its `repeats` (timed calls per method and key, after the
         compiling one; the median is reported), `progress` and `max_seconds` (a limit on
         the whole comparison's run time: after the first key the rest is estimated from
@@ -234,6 +260,19 @@ def compare(
     `compile_s` (the first call, compilation included: the first key only, else `None`)
     and the metrics.
     """
+    if noise_levels is not None:
+        if "noise_px" not in getattr(problem, "data_parameters", ()):
+            what = getattr(problem, "title", type(problem).__name__)
+            raise ValueError(f"{what}: noise levels need `noise_px` among its data parameters")
+        levels = [float(x) for x in noise_levels]
+        if not levels or not all(np.isfinite(x) and x >= 0 for x in levels):
+            raise ValueError(f"`noise_levels` must be finite levels >= 0; got {noise_levels!r}.")
+        out = Comparison()
+        for x in levels:
+            at = {**dict(params or {}), "noise_px": x}
+            for r in compare(problem, keys, params=at, methods=methods, study=study):
+                out.append({**r, "noise_px": x})
+        return out
     version3 = {"seeds", "first_seed", "updates"} & set(legacy)
     if not isinstance(problem, AbstractProblem) or old or version3 or keys is None:
         if methods is not None:

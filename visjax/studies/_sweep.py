@@ -686,8 +686,9 @@ def best(table, metric: str) -> dict:
     }
 
 
-def save_table(table, out_dir) -> dict:
-    """Write a sweep table as `runs.parquet` and `runs.csv` in `out_dir` (created).
+def save_table(table, out_dir, name: str = "runs") -> dict:
+    """Write a sweep table (or any table: a comparison's records) as `<name>.parquet` and
+    `<name>.csv` in `out_dir` (created).
 
     **Returns:** `{"parquet": path, "csv": path}`."""
     from pathlib import Path
@@ -695,9 +696,9 @@ def save_table(table, out_dir) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     table = _as_frame(table)
-    table.to_parquet(out / "runs.parquet", index=False)
-    table.to_csv(out / "runs.csv", index=False)
-    return {"parquet": out / "runs.parquet", "csv": out / "runs.csv"}
+    table.to_parquet(out / f"{name}.parquet", index=False)
+    table.to_csv(out / f"{name}.csv", index=False)
+    return {"parquet": out / f"{name}.parquet", "csv": out / f"{name}.csv"}
 
 
 def held_out(
