@@ -65,7 +65,7 @@ def test_bootstrap_interval_leaves_failures_out_and_differentiates():
     g = jax.grad(lambda v: studies.bootstrap_interval(key, v).value)(np.array([4.0, 1.0, 3.0, 2.0]))
     np.testing.assert_allclose(g, [0.0, 0.0, 0.5, 0.5])
     with pytest.raises(ValueError, match="level"):
-        studies.bootstrap_interval(key, x, level=95)
+        studies.bootstrap_interval(key, x, level=95.0)
 
 
 def test_paired_comparison_of_a_shift():
