@@ -110,12 +110,13 @@ def noise_levels(text: str) -> float | tuple[float, ...]:
     return levels[0] if len(levels) == 1 else levels
 
 
-def common(p, out=OUT, noise=None, seed=None, seeds=None, data=None, fmt=True, levels=False):
+def common(p, out=OUT, noise=False, seed=None, seeds=None, data=None, fmt=True, levels=False):
     """The shared vocabulary: --noise (`levels`: a list too), --seed, --seeds, --data, --out,
     --quiet, --format."""
-    if noise is not None:
+    if noise is not False:  # None: the problem's own
         kind, more = (noise_levels, "; a,b,c: each") if levels else (nonnegative, "")
-        arg(p, "--noise", kind, noise, f"pixel noise sigma, px (default {noise:g}{more})")
+        said = "the problem's own" if noise is None else f"{noise:g}"
+        arg(p, "--noise", kind, noise, f"pixel noise sigma, px (default {said}{more})")
     if seed is not None:
         arg(p, "--seed", seed_number, 0, seed)
     if seeds is not None:

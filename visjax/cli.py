@@ -56,11 +56,11 @@ def build_parser() -> argparse.ArgumentParser:
     run = o.verb(sub, "run", "one method of a problem once", seeds=None, noise=0.0, grid=False)
     o.arg(run, "--method", None, None, "the method (default: the estimator)")
     help = "a problem's methods on identical noisy inputs"
-    cmp = o.verb(sub, "compare", help, seeds=4, noise=0.1, grid=False)
+    cmp = o.verb(sub, "compare", help, seeds=4, noise=None, grid=False)
     hours = "refuse, after the first seed, a comparison estimated to take longer (default 24)"
     o.arg(cmp, "--max-hours", o.positive, 24.0, hours)
     help = "a grid of a problem's parameters over noise seeds"
-    sw = o.verb(sub, "sweep", help, seeds=8, noise=0.1, grid=True)
+    sw = o.verb(sub, "sweep", help, seeds=8, noise=None, grid=True)
     o.arg(sw, "--resume", help="continue an interrupted sweep from its parts", action="store_true")
     ray = "run the chunks on a Ray cluster (no address: a local one; pip install visjax[ray])"
     o.arg(sw, "--ray", None, None, ray, nargs="?", const="local", metavar="ADDRESS")
@@ -70,7 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.arg(me, "--force", help=o.FORCE, action="store_true")
     o.arg(me, "--quiet", help="less printing", action="store_true")
     help = "a sweep, then gradient-based tuning from its best point"
-    tu = o.verb(sub, "tune", help, seeds=4, noise=0.1, grid=True)
+    tu = o.verb(sub, "tune", help, seeds=4, noise=None, grid=True)
     o.arg(tu, "--steps", o.count, 30, "optimiser steps (default 30)")
     o.arg(tu, "--learning-rate", o.positive, 0.1, "Adam's step on the log parameters (0.1)")
 
@@ -100,7 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     no_studies = "skip the camera matrix (Tables 5-1/5-2) and the v_py sensitivity"
     o.arg(tb, "--no-studies", help=no_studies, action="store_false", dest="studies")
-    o.common(tb, "tables, estimates, figures and videos", None, "the texture's seed (0)")
+    o.common(tb, "tables, estimates, figures and videos", False, "the texture's seed (0)")
 
     r = sub.add_parser("reproduce", help="every paper's main experiment and a summary")
     o.arg(r, "--quick", help=report.quick_help(), action="store_true")

@@ -38,7 +38,7 @@ class Request:
     method: str | None = None
     methods: Sequence[str] | None = None
     data: str | Path | None = None
-    noise: float | Sequence[float] = 0.1  # compare: several levels
+    noise: float | Sequence[float] | None = None  # None: the problem's; compare: levels
     seed: int = 0
     seeds: int = 1
     duration: float | None = None
@@ -81,7 +81,7 @@ class Request:
     def problems(self) -> list:
         """The problems the command runs, each variant's (`studies.build_problems`)."""
         return studies.build_problems(
-            self.problem, data=self.data, noise_px=np.max(self.noise), duration=self.duration,
+            self.problem, data=self.data, noise_px=self.noise, duration=self.duration,
             rate_hz=self.rate, variants=self.variants, every=self.command in ("sweep", "tune"),
             robust=self.robust, options=self.options,
         )  # fmt: skip
@@ -201,8 +201,8 @@ def compare_command(r: Request, built=None) -> dict:
             raise Refused(f"{where}: {e}: use fewer --seeds or raise --max-hours") from None
         body = {
             "problem": r.problem, "data": None if r.data is None else str(r.data),
-            "noise_px": r.noise, "seeds": r.seeds, "problem_settings": p.settings(),
-            "records": records,
+            "noise_px": studies.noise_level(p, r.noise), "seeds": r.seeds,
+            "problem_settings": p.settings(), "records": records,
         }  # fmt: skip
         label = p.label or p.metric
         print(f"{head}{p.title}: {r.seeds} noise seed(s); {p.metric}: {label}")
@@ -291,9 +291,9 @@ def sweep_command(r: Request, built=None) -> dict:
             failed = f" ({x['failed']} held-out run(s) failed)" if x["failed"] else ""
             name = p.defaults_label if name == "paper" else name
             print(f"{head}{name:<11} {values:<40} held-out {p.metric} = {x['metric']:.4g}{failed}")
-        held = [r.seed + r.seeds, r.seed + 2 * r.seeds - 1]
         result = found.report(p) | {"method": p.check_method(method), "grid": spec}
-        result |= {"noise_px": r.noise, "seeds": r.seeds, "held_out_seeds": held}
+        result |= {"noise_px": studies.noise_level(p, r.noise), "seeds": r.seeds}
+        result["held_out_seeds"] = r.keys(held=True)[[0, -1]].tolist()
         if tune:
             adam = f"optax.adam({r.learning_rate}) on the log parameters, forward mode"
             result |= {"steps": r.steps, "optimiser": adam}

@@ -203,7 +203,11 @@ SUMMARIES = {
     "compare": {
         "problem": ("str", "the registered problem's name (as given on the command line)"),
         "data": ("str|null", "the data file, or `null` for the paper's scenario"),
-        "noise_px": ("float|list[float]", "pixel noise sigma, px (`--noise a,b,c`: the levels)"),
+        "noise_px": (
+            "float|list[float]|null",
+            "pixel noise sigma, px (`--noise a,b,c`: the levels; default the problem's own, "
+            "`null` for a problem without a `noise_px` data parameter)",
+        ),
         "seeds": ("int", "noise seeds"),
         "problem_settings": ("dict", "the problem's scenario and methods"),
         "records": ("list[dict]", "one per method and seed (the rows of `records.parquet`)"),
@@ -234,7 +238,7 @@ SUMMARIES = {
         "problem": ("str", "the problem's name"),
         "method?": ("str", "the method swept (`--methods`; default the estimator)"),
         "grid": ("str", "the grid of the problem's parameters"),
-        "noise_px": ("float", "pixel noise sigma, px"),
+        "noise_px": ("float|null", "pixel noise sigma, px (`null`: the problem states none)"),
         "seeds": ("int", "training noise seeds"),
         "held_out_seeds": ("list[int]", "the first and last held-out seed"),
         "best_training_metric": ("float|null", "the best point's metric on the training seeds"),
@@ -255,7 +259,7 @@ SUMMARIES = {
         "problem": ("str", "the problem's name"),
         "method?": ("str", "the method tuned (`--methods`; default the estimator)"),
         "grid": ("str", "the grid of the sweep"),
-        "noise_px": ("float", "pixel noise sigma, px"),
+        "noise_px": ("float|null", "pixel noise sigma, px (`null`: the problem states none)"),
         "seeds": ("int", "training noise seeds"),
         "held_out_seeds": ("list[int]", "the first and last held-out seed"),
         "steps": ("int", "optimiser steps"),

@@ -60,6 +60,7 @@ from ._problem import (
     innovation_line as innovation_line,
     judge as judge,
     judge_innovation as judge_innovation,
+    noise_level as noise_level,
     noise_parameter as noise_parameter,
     quality as quality,
     quality_line as quality_line,

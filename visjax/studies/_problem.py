@@ -60,6 +60,17 @@ def noise_parameter(noise_px) -> Parameter:
     )  # fmt: skip
 
 
+def noise_level(problem: "AbstractProblem", given=None):
+    """The pixel noise of a study: `given` (a level, or levels) when not `None`, else the
+    problem's own (its `noise_px` data parameter, a float; `None` for a problem without
+    one)."""
+    if given is not None:
+        return given
+    if "noise_px" not in problem.data_parameters:
+        return None
+    return float(problem.resolve()["noise_px"])
+
+
 def as_default(x) -> float | tuple:
     """A number or an array as a `Parameter.default` (a float, or nested tuples)."""
     x = np.asarray(x, float)

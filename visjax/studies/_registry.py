@@ -21,6 +21,8 @@ import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from ..estimators import MAX_STEPS
 from ..io import output_name
 from ._methods import Method, WithMethods, check_added
@@ -129,6 +131,8 @@ def build_problems(
     variant or option (`Registered.check`)."""
     entry = registered(name)
     data = None if data is None else str(data)
+    if noise_px is not None and np.ndim(noise_px):  # levels (compare): built at the largest
+        noise_px = float(np.max(noise_px))
     entry.check(data, duration, rate_hz, variants)
     given = dict(
         data=data, noise_px=noise_px, duration=duration, rate_hz=rate_hz,
