@@ -288,9 +288,9 @@ class AbstractProblem(eqx.Module):
             )
         return method
 
-    def check_methods(self, methods: Sequence[str] | None) -> tuple[str, ...]:
-        """The methods a study runs: `methods` (each checked, `check_method`; in the given
-        order, once each), or every method when `None`."""
+    def check_methods(self, methods: Sequence[str | None] | None) -> tuple[str, ...]:
+        """The methods a study runs: `methods` (each checked, `check_method`, a `None` entry
+        the estimator; in the given order, once each), or every method when `None`."""
         if methods is None:
             return tuple(self.methods)
         if isinstance(methods, str) or not len(methods):
