@@ -225,8 +225,8 @@ class WithMethods(AbstractProblem):
             return self.base.figure(method, solution)
         if m.like is not None:
             fig = self.base.figure(m.like, solution)
-            title = fig._suptitle
-            if title is not None and title.get_text().endswith(f": {m.like}"):
-                fig.suptitle(title.get_text().removesuffix(m.like) + method)
+            title = fig.get_suptitle()  # the like method's name in it: this method's
+            if title.endswith(f": {m.like}"):
+                fig.suptitle(title.removesuffix(m.like) + method)
             return fig
         return AbstractProblem.figure(self, method, solution)
