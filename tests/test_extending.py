@@ -112,9 +112,10 @@ def test_the_page_runs_as_a_script(module_dir):
 def test_a_method_of_your_own_beside_the_velocity_estimator(module_dir, monkeypatch, capsys):
     """The page's second example from the command line: the differenced velocity added to
     the registered `velocity` problem by the `--import`ed module, run, swept over its own
-    parameter and compared with the estimator on the same draws; at 0.1 px over 1 s it
-    beats zero velocity (the trivial estimate) and its swept cutoff beats its default on
-    held-out seeds."""
+    parameter, and both methods tuned with the same budget and compared on the same draws;
+    at 0.1 px over 1 s it beats zero velocity (the trivial estimate), its swept cutoff
+    beats its default on held-out seeds, and the tuning spends 4 evaluations on each
+    method's own parameters over the two seeds after the compared ones."""
     monkeypatch.chdir(module_dir)
     commands = [shlex.split(line) for line in _blocks("bash")[1].strip().splitlines()]
     assert [c[3] for c in commands] == ["run", "sweep", "compare"]
@@ -128,5 +129,18 @@ def test_a_method_of_your_own_beside_the_velocity_estimator(module_dir, monkeypa
     records = pd.read_parquet(module_dir / "diff_compare" / "records.parquet")
     assert list(records["method"]) == ["estimator", "differenced"] * 2
     assert (records["result"] == "successful").all()
-    settings = read_summary(module_dir / "diff_compare" / "summary.json")["problem_settings"]
-    assert settings["added_methods"]["differenced"]["like"] == "ekf"
+    summary = read_summary(module_dir / "diff_compare" / "summary.json")
+    assert summary["problem_settings"]["added_methods"]["differenced"]["like"] == "ekf"
+    tuning = summary["tuning"]
+    assert tuning["budget"] == 4 and tuning["train_seeds"] == [2, 3]
+    assert set(records["seed"]) == {0, 1}  # disjoint from the training seeds
+    own = tuning["methods"]["differenced"]
+    assert own["evaluations"] == 4 and list(own["searched"]) == ["cutoff_hz"]
+    assert own["searched"]["cutoff_hz"] == [0.5, 50.0]
+    assert (own["train_failed"], own["train_median"]) <= (
+        own["train_failed_at_defaults"],
+        own["train_median_at_defaults"],
+    )
+    assert list(tuning["methods"]["estimator"]["searched"]) == ["K_scale", "rho_scale"]
+    history = pd.read_parquet(module_dir / "diff_compare" / "tuning.parquet")
+    assert len(history) == 8 and set(history["method"]) == {"estimator", "differenced"}

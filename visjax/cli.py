@@ -59,6 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     cmp = o.verb(sub, "compare", help, seeds=4, noise=None, grid=False)
     hours = "refuse, after the first seed, a comparison estimated to take longer (default 24)"
     o.arg(cmp, "--max-hours", o.positive, 24.0, hours)
+    tune = "first tune every method, with the same --budget, on as many other seeds"
+    o.arg(cmp, "--tune", help=tune, action="store_true")
+    budget = f"objective evaluations per method for --tune (default {studies.BUDGET})"
+    o.arg(cmp, "--budget", o.count, studies.BUDGET, budget)
     help = "a grid of a problem's parameters over noise seeds"
     sw = o.verb(sub, "sweep", help, seeds=8, noise=None, grid=True)
     o.arg(sw, "--resume", help="continue an interrupted sweep from its parts", action="store_true")

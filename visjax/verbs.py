@@ -59,6 +59,8 @@ class Request:
     quiet: bool = False
     formats: Sequence[str] = ("png",)
     tables: Sequence[str] = ()
+    tune: bool = False  # compare: every method tuned first (`studies.compare_tuned`)
+    budget: int = studies.BUDGET
     options: dict | None = None
 
     def __post_init__(self):
@@ -186,16 +188,18 @@ def compare_command(r: Request, built=None) -> dict:
     whole would pass `max_hours`. Prints the medians per method, their intervals and the
     paired comparisons (`Comparison.statistics`); writes `summary.json` (kind `compare`: a
     record per method and seed, `statistics`), `records.parquet`, `records.csv`,
-    `comparison.<format>` and `comparison.md|tex` (`tables`)."""
+    `comparison.<format>` and `comparison.md|tex` (`tables`). `tune`: each method first
+    tuned with `budget` evaluations on as many other seeds (`studies.compare_tuned`; the
+    summary's `tuning`, `tuning.parquet`)."""
     dropped = _dropped(r)
 
     def one(p, head, folder):
         try:
             study = Study(progress=not r.quiet, max_seconds=r.max_hours * 3600)
             levels = r.noise if np.ndim(r.noise) else None
-            records = studies.compare(
-                p, r.keys(), methods=r.methods, noise_levels=levels, study=study
-            )
+            kw = {"methods": r.methods, "noise_levels": levels, "study": study}
+            budget = r.budget if r.tune else 0  # 0: the defaults, untuned
+            records, tuning = studies.compare_tuned(p, r.keys(), r.keys(True), budget, **kw)
         except studies.StudyTooLong as e:
             where = f"compare {r.problem} {head}".strip()
             raise Refused(f"{where}: {e}: use fewer --seeds or raise --max-hours") from None
@@ -206,27 +210,27 @@ def compare_command(r: Request, built=None) -> dict:
         }  # fmt: skip
         label = p.label or p.metric
         print(f"{head}{p.title}: {r.seeds} noise seed(s); {p.metric}: {label}")
+        if tuning is not None:
+            body["tuning"] = tuning.as_json()
+            print("\n".join(head + line for line in tuning.lines()))
         _say_dropped(body, dropped, head)
-        worse, judged = studies.judge_records(p, records)
-        if judged is not None:
-            body["quality"] = judged
-        body["statistics"] = stats = records.statistics(p.metric, seed=r.seed)
-        medians = () if levels else (records.medians_table(p.metric, worse),)
-        tables = (*medians, *studies.statistics_tables(stats))
+        more, tables, warning = studies.comparison_report(p, records, r.seed)
+        body |= more
         for t in tables:
             print(t.to_string(index=False, na_rep="-", float_format="{:.4g}".format))
-        if worse is not None and any(worse.values()):
-            what = f"{judged['trivial_estimate']} ({p.metric} {judged['trivial']:.4g})"
-            print(f"{head}warning: {sum(worse.values())} run(s) no better than {what}")
+        if warning is not None:
+            print(f"{head}{warning}")
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
             for form in r.tables:  # the statistics' two tables, for a paper
                 text = "\n".join(studies.table_text(t, form) for t in tables[-2:])
                 (folder / f"comparison.{form}").write_text(text)
             studies.save_table(records.to_pandas(), folder, "records")
+            if tuning is not None:
+                studies.save_table(tuning.to_pandas(), folder, "tuning")
             fig = {"label": label, "title": p.title, "formats": r.formats}
             if levels:  # the error against the noise level, with its interval, per method
-                plot_noise_study(stats, path=folder / "noise.png", **fig)
+                plot_noise_study(body["statistics"], path=folder / "noise.png", **fig)
             accuracy = lambda x, k=p.metric: np.nan if x[k] is None else x[k]  # noqa: E731
             plot_comparison(records, accuracy, path=folder / "comparison.png", **fig)
         return "compare", body, folder
@@ -286,11 +290,7 @@ def sweep_command(r: Request, built=None) -> dict:
             print(f"{head}shard {job[0]}/{job[1]}: {len(found)} runs written to {parts}; {merge}")
             body = {"runs": len(found), "shard": list(job), "parts": str(parts)}
             return "sweep_shard", body, None
-        for name, x in found.held.items():  # `paper` keeps its JSON key, printed as the label
-            values = ", ".join(f"{k} = {np.round(v, 4).tolist()}" for k, v in x["params"].items())
-            failed = f" ({x['failed']} held-out run(s) failed)" if x["failed"] else ""
-            name = p.defaults_label if name == "paper" else name
-            print(f"{head}{name:<11} {values:<40} held-out {p.metric} = {x['metric']:.4g}{failed}")
+        print("\n".join(head + line for line in found.lines(p)))
         result = found.report(p) | {"method": p.check_method(method), "grid": spec}
         result |= {"noise_px": studies.noise_level(p, r.noise), "seeds": r.seeds}
         result["held_out_seeds"] = r.keys(held=True)[[0, -1]].tolist()

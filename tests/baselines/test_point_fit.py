@@ -139,3 +139,31 @@ def test_bad_arguments(static, no_jaxtyping):
         triangulate_point(stream, window=10, order=3)
     with pytest.raises(ValueError, match="stream"):
         moving_point_ekf(None, r_norm=1e-4, depth0=1.0, sigma_depth0=0.5, q_velocity=0.0)
+
+
+def test_the_warm_up_lasts_until_the_window_is_wide_enough(static):
+    """`min_baseline`: the warm-up ends at the first window that determines the point with
+    its camera centres at least that far apart; after it the estimates are those without
+    the test (the fits are the same), and a wider requirement starts later. With pixel
+    noise, a window of a few frames gives a depth of either sign: a lucky one ending the
+    warm-up makes the next one a failure (`behind_camera`), which the test prevents."""
+    stream, _ = static
+    noisy = eqx.tree_at(
+        lambda s: s.ys.y,
+        stream,
+        stream.ys.y + 1e-2 * jax.random.normal(jax.random.key(3), stream.ys.y.shape),
+    )  # 8 px at this focal length: windows of a few frames give either sign
+    starts, runs = [], {}
+    for b in (0.0, 0.02, 0.05):
+        sol = triangulate(noisy, window=30, min_baseline=b, throw=False)
+        p = np.asarray(sol.outputs.position)
+        starts.append(int(np.argmax(np.isfinite(p[:, 0]))))
+        runs[b] = (sol, p)
+    assert starts[0] < starts[1] < starts[2]
+    assert runs[0.0][0].result == RESULTS.behind_camera  # started by a lucky narrow window
+    assert runs[0.02][0].result == runs[0.05][0].result == RESULTS.successful
+    plain, late = runs[0.0][1], runs[0.05][1]
+    np.testing.assert_array_equal(late[starts[2] :], plain[starts[2] :])
+    assert np.isnan(late[: starts[2]]).all()
+    never = triangulate(noisy, window=30, min_baseline=1e3)
+    assert np.isnan(np.asarray(never.outputs.position)).all()

@@ -286,3 +286,25 @@ def test_covariance_predicts_the_spread_over_noise_seeds():
     predicted = np.sqrt(np.median(np.diagonal(np.asarray(est.cov), axis1=1, axis2=2), 0))
     np.testing.assert_allclose(predicted / mc, 1.0, atol=0.2)
     assert np.all(np.isfinite(est.cov))
+
+
+def test_opencv_ransac_under_vmap_takes_each_threshold(scenes):
+    """`baselines.ransac_homographies` (OpenCV's RANSAC through a callback) under `vmap`
+    over noise draws with an unbatched threshold, and over thresholds: each batch member's
+    homographies are OpenCV's at its own threshold (an unbatched threshold once reached
+    the callback as an array and failed)."""
+    from visjax.baselines import ransac_homographies
+
+    H, src, dst, *_ = scenes
+    ref, frames = src[0], np.stack([_apply(H[i], src[0]) for i in range(3)])
+    draws = np.stack([frames, frames + 0.3])
+    G = jax.vmap(lambda p: ransac_homographies(ref, p, threshold_px=3.0))(draws)
+    for d in range(2):
+        for k in range(3):
+            expect, _ = cv2.findHomography(ref, draws[d, k], cv2.RANSAC, 3.0)
+            np.testing.assert_allclose(G[d, k], expect / expect[2, 2], rtol=1e-6, atol=1e-9)
+    thresholds = jnp.array([1.0, 5.0])
+    G = jax.vmap(lambda t: ransac_homographies(ref, frames, threshold_px=t))(thresholds)
+    for i, t in enumerate((1.0, 5.0)):
+        expect, _ = cv2.findHomography(ref, frames[0], cv2.RANSAC, t)
+        np.testing.assert_allclose(G[i, 0], expect / expect[2, 2], rtol=1e-6, atol=1e-9)

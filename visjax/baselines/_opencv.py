@@ -43,16 +43,22 @@ def opencv_reconstruction(p_ref, p_cur, A, n_prior) -> dict:
 def _ransac_host(reference, pixels, threshold):
     import cv2
 
-    reference = np.asarray(reference, np.float64)
-    out = np.full(pixels.shape[:-2] + (3, 3), np.nan)
-    flat = np.asarray(pixels, np.float64).reshape((-1,) + pixels.shape[-2:])
-    ref = np.broadcast_to(reference, pixels.shape[:-3] + reference.shape[-2:]).reshape(
+    # under `vmap` (`expand_dims`) each argument has the batch's leading axes, of size 1
+    # where it is not batched: broadcast to the batch (a vmapped threshold: each its own)
+    reference, pixels = np.asarray(reference, np.float64), np.asarray(pixels, np.float64)
+    threshold = np.asarray(threshold, np.float64)
+    batch = np.broadcast_shapes(reference.shape[:-2], pixels.shape[:-3], threshold.shape)
+    frames = pixels.shape[-3]
+    out = np.full(batch + (frames, 3, 3), np.nan)
+    flat = np.broadcast_to(pixels, batch + pixels.shape[-3:]).reshape((-1,) + pixels.shape[-2:])
+    ref = np.broadcast_to(reference, batch + reference.shape[-2:]).reshape(
         (-1,) + reference.shape[-2:]
     )
-    frames = pixels.shape[-3]
     res = out.reshape((-1, 3, 3))
+    thresholds = np.broadcast_to(threshold, batch).reshape(-1)
     for k in range(flat.shape[0]):
-        G, _ = cv2.findHomography(ref[k // frames], flat[k], cv2.RANSAC, float(threshold))
+        t = float(thresholds[k // frames])
+        G, _ = cv2.findHomography(ref[k // frames], flat[k], cv2.RANSAC, t)
         if G is not None:
             res[k] = G
     return res.reshape(out.shape)

@@ -149,6 +149,7 @@ def triangulate_point(
     window: int,
     order: int = 0,
     rcond: float = 1e-9,
+    min_baseline: float | ArrayLike = 0.0,
     refine: bool = False,
     loss=None,
     irls_steps: int = 10,
@@ -166,6 +167,13 @@ def triangulate_point(
     static point); `rcond` the smallest accepted ratio of the smallest to the largest
     eigenvalue of the normal equations (scaled to unit columns): below it the window does
     not determine the point (no camera translation, too few frames), `RESULTS.singular`;
+    `min_baseline` (in the units of the camera velocities times seconds; default 0: no
+    test): the warm-up lasts until a window whose camera centres reach `min_baseline` from
+    the current one determines the point (the triangulation angle is about the baseline
+    over the distance: with pixel noise $\\sigma$ and focal $f$, a window whose angle is
+    under a few $\\sigma/f$ gives a depth of either sign, so a lucky early window of a few
+    frames would end the warm-up and the next one fail; the point's own estimate is no
+    guide to its distance there, so the caller states the baseline, from a depth guess);
     `refine` (static point only, `order=0`): start a Levenberg-Marquardt minimisation of
     the reprojection residuals (module docstring; the cost of `triangulation_residuals`)
     from each window's linear solution, and return its minimiser, the maximum-likelihood
@@ -311,6 +319,9 @@ def triangulate_point(
             sol = optx.least_squares(robust, solver, m0, data, max_steps=max_steps, throw=False)
             m, refined = sol.value, RESULTS.promote(sol.result)
             cov, _ = covariance(robust, m, data, count)
+        # the window's baseline: its farthest camera centre from the current one (a
+        # comparison: no gradient flows through it)
+        wide = jnp.max(jnp.where(use, jnp.linalg.norm(c_kj, axis=1), 0.0)) >= min_baseline
         ok = determined & (refined == RESULTS.successful) & (m[2] > 0.0) & all_finite(m)
         code = RESULTS.where(
             ~determined,
@@ -324,14 +335,15 @@ def triangulate_point(
         code = RESULTS.where(ok, RESULTS.successful, code)
         code = RESULTS.where(bad_input[k], RESULTS.nonfinite_measurement, code)
         code = RESULTS.where(~loss.checks(), RESULTS.invalid_settings, code)
-        return _output(m), code, cov
+        return _output(m), code, cov, wide
 
-    outputs, codes, covs = jax.vmap(fit)(jnp.arange(n))
+    outputs, codes, covs, wide = jax.vmap(fit)(jnp.arange(n))
     # warm-up: until a window first gives a point (enough frames and camera translation
     # to determine it, in front of the camera) the estimate is NaN and that is not a
     # failure; after it, a window that does not (the camera stopped translating) is one,
     # and a non-finite measurement always is
-    started = jnp.cumsum(codes == RESULTS.successful) > 0
+    # (a window wide enough: `min_baseline`)
+    started = jnp.cumsum((codes == RESULTS.successful) & wide) > 0
     failed_mask = (codes != RESULTS.successful) & (
         started | (codes == RESULTS.nonfinite_measurement)
     )

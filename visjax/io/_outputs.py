@@ -219,6 +219,14 @@ SUMMARIES = {
             "(`pairs`: `a`, `b`) the `median_difference` a - b on the seeds both succeeded "
             "on, its interval and the Wilcoxon signed-rank `pvalue`",
         ),
+        "tuning?": (
+            "dict",
+            "`--tune` (`studies.Tuning.as_json`): `search`, `budget` (evaluations per "
+            "method), `metric`, `train_seeds` (disjoint from the records' seeds) and per "
+            "method (`methods`) the `searched` parameters with their ranges, the tuned "
+            "`params`, their `defaults`, `train_median` and `train_failed` at the tuned "
+            "point and at the defaults (`..._at_defaults`), and `evaluations`",
+        ),
         "dropped_fraction?": _DROPPED_STUDY,
         "quality?": (
             "dict",
@@ -370,6 +378,13 @@ TABLES = {
         "rms_ideal_pixels_m": "float",
         "thesis_rms_m": "float",
         "feasible": "bool",
+    },
+    "compare/tuning.parquet": {
+        "method": "str",
+        "evaluation": "int (0: the defaults)",
+        "<parameter>": "float (each searched parameter of the method; `--tune`)",
+        "failed": "int (training seeds failed)",
+        "median": "float (the headline metric's median over the others)",
     },
     "reproduce summary.parquet": {
         "name": "str",

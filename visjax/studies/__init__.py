@@ -14,6 +14,7 @@ from ._compare import (
     Comparison as Comparison,
     StudyTooLong as StudyTooLong,
     compare as compare,
+    comparison_report as comparison_report,
     statistics_tables as statistics_tables,
     table_text as table_text,
 )
@@ -64,6 +65,7 @@ from ._problem import (
     noise_parameter as noise_parameter,
     quality as quality,
     quality_line as quality_line,
+    robust_parameters as robust_parameters,
     solution as solution,
 )
 from ._registry import (
@@ -87,6 +89,14 @@ from ._reproductions import (
     registered_reproduction as registered_reproduction,
     reproduction_names as reproduction_names,
     reproduction_row as reproduction_row,
+)
+from ._search import (
+    BUDGET as BUDGET,
+    MethodTuning as MethodTuning,
+    Tuning as Tuning,
+    compare_tuned as compare_tuned,
+    searched_parameters as searched_parameters,
+    tune_methods as tune_methods,
 )
 from ._stats import (
     Interval as Interval,

@@ -15,6 +15,7 @@ from .._results import RESULTS, result_names
 from ._problem import AbstractProblem, as_json, method_runs
 from ._stats import bootstrap_interval, paired_comparison
 from ._study import Result, Study, seed_keys, study_of
+from ._verdict import judge_records
 
 
 class StudyTooLong(ValueError):
@@ -127,6 +128,26 @@ class Comparison(Result, list):
         return {"metric": metric, **opts, "seed": seed, "methods": methods, "pairs": pairs}
 
 
+def comparison_report(problem: AbstractProblem, records: "Comparison", seed: int = 0):
+    """What `visjax compare` reports of `records` (of `problem`): `(body, tables,
+    warning)`: the summary's `statistics` (`Comparison.statistics`, its resamples from
+    `seed`) and `quality` (`judge_records`, where the problem has a trivial estimate);
+    the printed tables (the medians per method, without noise levels, then the two of
+    `statistics_tables`); a warning line when runs were no better than the trivial
+    estimate (else `None`)."""
+    body, warning = {}, None
+    worse, judged = judge_records(problem, records)
+    if judged is not None:
+        body["quality"] = judged
+    body["statistics"] = stats = records.statistics(problem.metric, seed=seed)
+    by_noise = "by_noise" in stats
+    medians = () if by_noise else (records.medians_table(problem.metric, worse),)
+    if worse is not None and any(worse.values()):
+        what = f"{judged['trivial_estimate']} ({problem.metric} {judged['trivial']:.4g})"
+        warning = f"warning: {sum(worse.values())} run(s) no better than {what}"
+    return body, (*medians, *statistics_tables(stats)), warning
+
+
 def statistics_tables(stats: Mapping[str, Any]):
     """`Comparison.statistics` as two pandas tables, as `visjax compare` prints and exports
     them: per method (median, interval, successful runs, failure rate, the codes of the
@@ -221,6 +242,7 @@ def compare(
     params: Mapping[str, Any] | None = None,
     methods: Sequence[str] | None = None,
     noise_levels: Sequence[float] | None = None,
+    method_params: Mapping[str, Mapping[str, Any]] | None = None,
     study: Study | None = None,
     **legacy: Any,
 ) -> Comparison:
@@ -241,6 +263,9 @@ def compare(
     - `keys`: the noise seeds: a 1-D array of ints (`jax.random.key(seed)` each) or of
         typed PRNG keys (the records' `seed` is then the index).
     - `params`: name -> value, overriding the defaults for every method.
+    - `method_params`: method -> (name -> value) of that method alone, over `params` (a
+        tuned point per method, `tune_methods`); not a data parameter (every method sees
+        the same draw).
     - `methods`: the methods to run, in this order (default: every one).
     - `noise_levels`: pixel noise levels (px): the comparison at each (the problem's data
         parameter `noise_px`, the same keys), each record tagged with its `noise_px`.
@@ -270,17 +295,28 @@ def compare(
         out = Comparison()
         for x in levels:
             at = {**dict(params or {}), "noise_px": x}
-            for r in compare(problem, keys, params=at, methods=methods, study=study):
+            for r in compare(
+                problem, keys, params=at, methods=methods, method_params=method_params,
+                study=study,
+            ):  # fmt: skip
                 out.append({**r, "noise_px": x})
         return out
     version3 = {"seeds", "first_seed", "updates"} & set(legacy)
     if not isinstance(problem, AbstractProblem) or old or version3 or keys is None:
-        if methods is not None:
+        if methods is not None or method_params is not None:
             raise ValueError("`methods` is for `compare(problem, keys, ...)`.")
         return _version3(problem, keys, *old, params=params, study=study, **legacy)
     study = study_of(study, "compare", **legacy)
     typed, seed_values = seed_keys(keys, "compare")
-    resolved = problem.at(problem.resolve(params))  # its data parameters set
+    for m, given in dict(method_params or {}).items():
+        data = sorted(set(given) & set(problem.data_parameters))
+        if data:
+            raise ValueError(
+                f"`method_params[{m!r}]` sets data parameter(s) {data}: every method sees "
+                "the same draw; set them in `params`."
+            )
+    resolved = problem.structured(params or {})
+    resolved = resolved.at(resolved.resolve(params))  # its data parameters set
 
     def problem_inputs(key):
         return resolved.inputs(key), None
@@ -292,11 +328,11 @@ def compare(
         spread = jax.tree_util.tree_map(np.asarray, resolved.uncertainty(name, sol))
         return {**as_json(values, ok), **as_json(spread, ok, nullable=True)}
 
-    runs = method_runs(resolved, params, methods)
-    updates = {m: resolved.updates(m) for m in runs}
+    runs = method_runs(resolved, params, methods, method_params)
+    updates = {m: own.updates(m) for m, (_, own) in runs.items()}
     return _compare(
-        runs, problem_inputs, problem_score, typed, seed_values,
-        updates, study,
+        {m: solve for m, (solve, _) in runs.items()}, problem_inputs, problem_score, typed,
+        seed_values, updates, study,
     )  # fmt: skip
 
 

@@ -110,6 +110,10 @@ class WithMethods(AbstractProblem):
         return self.base.data_parameters
 
     @property
+    def structural_parameters(self) -> tuple[str, ...]:
+        return self.base.structural_parameters
+
+    @property
     def title(self) -> str:
         return self.base.title
 
@@ -160,6 +164,10 @@ class WithMethods(AbstractProblem):
 
     def at(self, params: Mapping[str, Any]) -> "WithMethods":
         return eqx.tree_at(lambda p: p.base, self, self.base.at(params))
+
+    def structured(self, params: Mapping[str, Any]) -> "WithMethods":
+        base = self.base.structured(self._base_params(params))
+        return self if base is self.base else eqx.tree_at(lambda p: p.base, self, base)
 
     def gains(self, params: Mapping[str, Any]) -> dict:
         p = self.resolve(params)

@@ -250,6 +250,19 @@ class Selection(Result):
         ]
         return pd.DataFrame(rows)
 
+    def lines(self, problem: AbstractProblem) -> list[str]:
+        """The held-out points as `visjax sweep` and `visjax tune` print them, one line
+        each (the defaults under the problem's `defaults_label`)."""
+        out = []
+        for name, x in self.held.items():  # `paper` keeps its JSON key, printed as the label
+            values = ", ".join(f"{k} = {np.round(v, 4).tolist()}" for k, v in x["params"].items())
+            failed = f" ({x['failed']} held-out run(s) failed)" if x["failed"] else ""
+            name = problem.defaults_label if name == "paper" else name
+            out.append(
+                f"{name:<11} {values:<40} held-out {problem.metric} = {x['metric']:.4g}{failed}"
+            )
+        return out
+
     def report(self, problem: AbstractProblem) -> dict:
         """What the selection found, as JSON (the summaries of `visjax sweep` and `visjax
         tune`): the metric; the held-out points (`best`: the tuned one after a tuning;

@@ -9,6 +9,7 @@ methods take (`parameters`: defaults, units, positivity) and how a solution is s
 """
 
 import abc
+import dataclasses
 import difflib
 import hashlib
 from collections.abc import Mapping, Sequence
@@ -29,9 +30,12 @@ class Parameter(eqx.Module):
     **Fields:** `default` (a float, or nested tuples of floats for an array parameter: the
     published value where there is one); `units`; `positive` (the value must stay above 0:
     `tune` then optimises its logarithm); `doc` (one line: what it is, where it comes
-    from); `nonnegative` (the value must not be below 0, e.g. a noise level). A scalar
-    given for an array parameter is broadcast to its shape (one value for every
-    component).
+    from); `nonnegative` (the value must not be below 0, e.g. a noise level); `span`
+    (`(low, high)`, both positive: the range `compare --tune` searches, log-uniform;
+    default a decade either side of a positive scalar default, `None` for an array or a
+    parameter that may be 0 or negative); `tunable` (`False`: `compare --tune` leaves it
+    at its default, e.g. an initial guess that every method shares). A scalar given for an
+    array parameter is broadcast to its shape (one value for every component).
     """
 
     default: Any = eqx.field(static=True)
@@ -39,6 +43,27 @@ class Parameter(eqx.Module):
     positive: bool = eqx.field(static=True, default=True)
     doc: str = eqx.field(static=True, default="")
     nonnegative: bool = eqx.field(static=True, default=False)
+    span: tuple[float, float] | None = eqx.field(static=True, default=None)
+    tunable: bool = eqx.field(static=True, default=True)
+
+    def __check_init__(self):
+        if self.span is not None:
+            lo, hi = self.span
+            if not (0 < lo < hi < np.inf):
+                raise ValueError(f"`span` must be (low, high), 0 < low < high; got {self.span}.")
+
+    @property
+    def search_span(self) -> tuple[float, float] | None:
+        """The range `compare --tune` searches (`span`; by default a decade either side of
+        a positive scalar default), or `None`: not searched."""
+        if not self.tunable:
+            return None
+        if self.span is not None:
+            return (float(self.span[0]), float(self.span[1]))
+        v = self.value
+        if v.ndim == 0 and self.positive and v > 0:
+            return (float(v) / 10, float(v) * 10)
+        return None
 
     @property
     def value(self) -> np.ndarray:
@@ -58,6 +83,18 @@ def noise_parameter(noise_px) -> Parameter:
         default, "px", False, "standard deviation of the Gaussian pixel noise of each draw",
         nonnegative=True,
     )  # fmt: skip
+
+
+def robust_parameters(scale_px: float, gate: float) -> dict[str, Parameter]:
+    """The parameters of a problem's robust baselines (its `robust` setting):
+    `robust_scale_px`, the robust loss' scale (px), and `ekf_gate_tail`, one minus the
+    probability of the EKF's outlier gate (searched over 1e-7 to 0.1, log-uniform)."""
+    return {
+        "robust_scale_px": Parameter(scale_px, "px", True, "the robust loss' scale"),
+        "ekf_gate_tail": Parameter(
+            1.0 - gate, "", True, "one minus the EKF gate's probability", span=(1e-7, 0.1)
+        ),
+    }
 
 
 def noise_level(problem: "AbstractProblem", given=None):
@@ -102,7 +139,10 @@ class AbstractProblem(eqx.Module):
     Optional: `own_parameters` (method -> the names of the parameters it uses,
     `method_parameters`: a grid axis no selected method uses is refused); `data_parameters`
     (the parameters that are data, not gains: each sets the
-    problem's field of the same name, `at`, e.g. `noise_px`, `noise_parameter`); `label`
+    problem's field of the same name, `at`, e.g. `noise_px`, `noise_parameter`);
+    `structural_parameters` (each sets a static field of the same name, `structured`: a
+    sliding window's length, a fit's bandwidth; a concrete value, a new compiled program
+    per value, never a grid axis; its default the field's value); `label`
     (the headline metric with its units); `grid` (the default grid of
     `visjax sweep`, a `parse_grid` spec); `title` (a one-line description); `scored`
     (whether there is a truth to score against; default `True`); `settings()` (every
@@ -131,6 +171,7 @@ class AbstractProblem(eqx.Module):
     defaults_label: ClassVar[str] = "paper"
     trivial_label: ClassVar[str] = "the trivial estimate"
     data_parameters: ClassVar[tuple[str, ...]] = ()
+    structural_parameters: ClassVar[tuple[str, ...]] = ()
     own_parameters: ClassVar[Mapping[str, tuple[str, ...]]] = {}
 
     @abc.abstractmethod
@@ -264,15 +305,46 @@ class AbstractProblem(eqx.Module):
             lambda p: [getattr(p, n) for n in names], self, [params[n] for n in names]
         )
 
+    def structured(self, params: Mapping[str, Any]) -> "AbstractProblem":
+        """The problem with its structural parameters (`structural_parameters`) set from
+        `params`: each replaces the static field of the same name (an int field takes a
+        whole number of at least 1), so the methods are compiled for it. Every study calls
+        it before `at`.
+
+        **Raises:** `ValueError` for a traced value or one of the wrong kind."""
+        names = [n for n in self.structural_parameters if n in params]
+        if not names:
+            return self
+        changes = {}
+        for n in names:
+            try:
+                v = float(np.asarray(params[n]))
+            except (TypeError, jax.errors.ConcretizationTypeError) as e:
+                raise ValueError(
+                    f"{self.title}: {n!r} is a structural parameter (it sets the size of a "
+                    "compiled program): give it a concrete number, not a traced or an array "
+                    "value; it cannot be swept in one compiled program."
+                ) from e
+            if isinstance(getattr(self, n), int):
+                if not (np.isfinite(v) and v == round(v) and v >= 1):
+                    raise ValueError(f"{self.title}: {n!r} must be a whole number >= 1; got {v}.")
+                v = int(round(v))
+            elif not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{self.title}: {n!r} must be positive and finite; got {v}.")
+            changes[n] = v
+        return dataclasses.replace(self, **changes)
+
     def method_parameters(self, method: str) -> tuple[str, ...]:
         """The tunable parameters `method` uses (its gains; the data parameters, such as
         `noise_px`, belong to every method and are not listed): `own_parameters[method]`
-        where the problem states it, else every parameter that is not data. A sweep or a
-        tuning of selected methods refuses a grid axis that none of them uses."""
+        where the problem states it (those the problem has: a robust setting's only when
+        it is robust), else every parameter that is neither data nor structural. A sweep
+        or a tuning of selected methods refuses a grid axis that none of them uses."""
+        specs = self.parameters()
         if method in self.own_parameters:
-            return tuple(self.own_parameters[method])
-        data = set(self.data_parameters)
-        return tuple(n for n in self.parameters() if n not in data)
+            return tuple(n for n in self.own_parameters[method] if n in specs)
+        skip = set(self.data_parameters) | set(self.structural_parameters)
+        return tuple(n for n in specs if n not in skip)
 
     def check_method(self, method: str | None) -> str:
         """The method's name (`None`: the estimator, the first). **Raises:** `ValueError`
@@ -301,6 +373,13 @@ class AbstractProblem(eqx.Module):
         """A sweep's or a tuning's parameter names (`names`) for `methods`: a parameter of
         the problem that is neither data nor used by any of them (`method_parameters`) is
         refused (the methods would be swept over a parameter they ignore)."""
+        fixed = [n for n in names if n in self.structural_parameters]
+        if fixed:
+            raise ValueError(
+                f"{self.title}: {fixed} set the size of a compiled program (structural "
+                "parameters): they cannot be a grid axis; give one value (--set, `fixed`) or "
+                "let `compare --tune` search them."
+            )
         used = set(self.data_parameters).union(*(self.method_parameters(m) for m in methods))
         idle = [n for n in names if n in self.parameters() and n not in used]
         if idle:
@@ -373,6 +452,11 @@ class _Run(eqx.Module):
     def __call__(self, point, key):
         params = dict(self.params)
         for name, value in point.items():
+            if name in self.problem.structural_parameters:
+                raise ValueError(
+                    f"{self.problem.title}: {name!r} is a structural parameter: not a point's "
+                    "(a grid axis); set it once (`fixed`)."
+                )
             if name not in params:
                 raise ValueError(
                     f"{self.problem.title}: unknown parameter {name!r}; it takes {sorted(params)}."
@@ -509,6 +593,7 @@ def runner(
     fixed = dict(fixed or {})
     if check:
         check_values(problem, fixed, "fixed parameters")
+    problem = problem.structured(fixed)
     return _Run(problem, method, problem.resolve(fixed))
 
 
@@ -622,15 +707,22 @@ def _solve_outputs(run, key):
     return problem.solve(run.method, run.params, problem.inputs(key), outputs=True)
 
 
-def method_runs(problem: AbstractProblem, params=None, methods=None) -> dict:
-    """name -> `inputs -> solution` of every method, or of `methods` (for `compare`)."""
-    resolved = problem.resolve(params)
+def method_runs(problem: AbstractProblem, params=None, methods=None, method_params=None) -> dict:
+    """name -> `(inputs -> solution, the problem it runs on)` of every method, or of
+    `methods` (for `compare`); `method_params`: method -> parameters of that method alone
+    (a tuned point), over `params`."""
+    each = dict(method_params or {})
 
     def make(method):
-        def solve(inputs):
-            return problem.solve(method, resolved, inputs)
+        given = {**dict(params or {}), **dict(each.get(method, {}))}
+        own = problem.structured(given)
+        resolved = own.resolve(given)
+        own = own.at(resolved)
 
-        return solve
+        def solve(inputs):
+            return own.solve(method, resolved, inputs)
+
+        return solve, own
 
     return {m: make(m) for m in problem.check_methods(methods)}
 

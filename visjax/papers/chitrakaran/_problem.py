@@ -38,7 +38,14 @@ from ...estimators import (
 from ...io import VelocityData
 from ...plots import plot_velocity
 from ...sim import add_pixel_noise
-from ...studies import AbstractProblem, Parameter, as_default, held, noise_parameter
+from ...studies import (
+    AbstractProblem,
+    Parameter,
+    as_default,
+    held,
+    noise_parameter,
+    robust_parameters,
+)
 from ._scene import K_EQ63, RHO_EQ63, section6_scenario, window
 
 # the robust settings (a stated choice, not tuned to any result; those of the static-points
@@ -78,7 +85,11 @@ class VelocityProblem(AbstractProblem):
     calibration before the run) and shared by every method.
 
     Parameters: `K` and `rho` (the gains of eq. (40), diagonal, 6 each; default eq. (63)
-    or the data file's), and `K_scale`, `rho_scale`, multipliers of them (default 1).
+    or the data file's), and `K_scale`, `rho_scale`, multipliers of them (default 1); the
+    baselines': `bandwidth_scale` (a multiplier of the fits' bandwidths, default 1: the
+    estimator's own; a structural parameter), `ekf_jerk` (the EKF's largest expected jerk,
+    its process noise) and, when `robust`, `robust_scale_px` and `ekf_gate_tail`
+    (`studies.robust_parameters`).
     Metrics: `rms` (6,), the RMS error per degree of freedom over the paper's window (5-10
     s; the second half of a shorter run, and of a data file), and `rms_worst`, its largest
     component (m/s and rad/s mixed, as in the paper's Table I). Uncertainty
@@ -100,7 +111,13 @@ class VelocityProblem(AbstractProblem):
     trivial_label = "zero velocity"
     data_parameters = ("noise_px",)
     grid = "K_scale=1e-3:1e1:9,rho_scale=1e-3:1e1:9"
-    own_parameters = {m: () for m in ("batch", "batch_window", "ekf")}
+    structural_parameters = ("bandwidth_scale",)
+    own_parameters = {
+        "estimator": ("K", "rho", "K_scale", "rho_scale"),
+        "batch": ("bandwidth_scale", "robust_scale_px"),
+        "batch_window": ("bandwidth_scale", "robust_scale_px"),
+        "ekf": ("ekf_jerk", "ekf_gate_tail"),
+    }
 
     ts: Float[ArrayLike, " n"]  # the sample times, s
     clean: Float[ArrayLike, "n m 2"]  # the noise-free pixels of the m features
@@ -128,6 +145,7 @@ class VelocityProblem(AbstractProblem):
     adjoint: AbstractAdjoint = DirectAdjoint()
     robust: bool = eqx.field(default=False, static=True)
     filter_hz: float | None = eqx.field(static=True, default=None)  # the estimate's low-pass
+    bandwidth_scale: float = eqx.field(static=True, default=1.0)  # of the fits' bandwidths
 
     @property
     def title(self) -> str:
@@ -144,10 +162,25 @@ class VelocityProblem(AbstractProblem):
         return {
             "K": Parameter(as_default(self.K), "1/s", True, "gain K of eq. (40), diagonal"),
             "rho": Parameter(as_default(self.rho), "", True, "gain rho of eq. (40), diagonal"),
-            "K_scale": Parameter(1.0, "", True, "multiplier of K"),
-            "rho_scale": Parameter(1.0, "", True, "multiplier of rho"),
+            # searched (`compare --tune`) over the default grid's range
+            "K_scale": Parameter(1.0, "", True, "multiplier of K", span=(1e-3, 10.0)),
+            "rho_scale": Parameter(1.0, "", True, "multiplier of rho", span=(1e-3, 10.0)),
             "noise_px": noise_parameter(self.noise_px),
-        }
+            "bandwidth_scale": Parameter(
+                float(self.bandwidth_scale),
+                "",
+                True,
+                "multiplier of the fits' bandwidths",
+                span=(0.25, 4.0),
+            ),
+            "ekf_jerk": Parameter(
+                float(self.max_jerk),
+                "m/s^3, rad/s^3",
+                True,
+                "the EKF's largest expected jerk",
+                span=(float(self.max_jerk) / 100, float(self.max_jerk) * 100),
+            ),
+        } | (robust_parameters(ROBUST_SCALE_PX, ROBUST_GATE) if self.robust else {})
 
     def gains(self, params) -> dict:
         p = self.resolve(params)
@@ -186,16 +219,17 @@ class VelocityProblem(AbstractProblem):
             )
             return sol if not low else self._lowpassed(sol)
         if method in ("batch", "batch_window"):
-            return self._fit(pixels, causal=method == "batch_window")
+            scale = params["robust_scale_px"] if self.robust else None
+            return self._fit(pixels, causal=method == "batch_window", robust_scale=scale)
         if method == "ekf":
             return velocity_ekf(
                 self.ts,
                 pixels,
                 self._camera(pixels),
                 r_px=jnp.maximum(self.noise_px, 0.05),
-                max_jerk=self.max_jerk,
-                max_angular_jerk=self.max_jerk,
-                gate=ROBUST_GATE if self.robust else None,
+                max_jerk=params["ekf_jerk"],
+                max_angular_jerk=params["ekf_jerk"],
+                gate=1.0 - params["ekf_gate_tail"] if self.robust else None,
                 throw=False,
             )
         raise ValueError(f"{self.title}: unknown method {method!r}; choose {self.methods}.")
@@ -247,11 +281,13 @@ class VelocityProblem(AbstractProblem):
         p_ref = pixels[0] if self.reference_pixels is None else self.reference_pixels
         return FixedCamera(p_ref, self.A, self.R_star, self.s1, self.n_star, self.z1_star)
 
-    def _fit(self, pixels, causal):
+    def _fit(self, pixels, causal, robust_scale=None):
 
         camera = self._camera(pixels)
-        poses = frame_poses(pixels, camera, loss=cauchy(ROBUST_SCALE_PX) if self.robust else None)
+        loss = None if robust_scale is None else cauchy(robust_scale)
+        poses = frame_poses(pixels, camera, loss=loss)
         interval = self.interval
+        bandwidths = self._fit_bandwidths()
         sols = {
             bw: velocity_smoother(
                 self.ts,
@@ -263,24 +299,20 @@ class VelocityProblem(AbstractProblem):
                 poses=poses,
                 throw=False,
             )
-            for bw in sorted(set(self.bandwidths))
+            for bw in sorted(set(bandwidths))
         }
         # each degree of freedom from the fit at its own bandwidth
         v_hat, v_object = (
-            jnp.stack(
-                [getattr(sols[bw].outputs, f)[:, i] for i, bw in enumerate(self.bandwidths)], 1
-            )
+            jnp.stack([getattr(sols[bw].outputs, f)[:, i] for i, bw in enumerate(bandwidths)], 1)
             for f in ("v_hat", "v_object")
         )
         # their covariance, the fits' cross terms included
-        widths = tuple(
-            half_width_for_bandwidth(bw, interval, causal=causal) for bw in self.bandwidths
-        )
+        widths = tuple(half_width_for_bandwidth(bw, interval, causal=causal) for bw in bandwidths)
         cov = velocity_covariance(poses, self.ts, widths, causal=causal)
         result, failed = RESULTS.successful, jnp.array(-1)
         for sol in sols.values():  # the first failure of any of the fits
             result, failed = first_failure(result, failed, sol.result, sol.failed_sample)
-        first = sols[self.bandwidths[0]]
+        first = sols[bandwidths[0]]
         return eqx.tree_at(
             lambda s: (
                 s.outputs.v_hat,
@@ -292,6 +324,11 @@ class VelocityProblem(AbstractProblem):
             first,
             (v_hat, v_object, result, failed, SmootherDiagnostics(poses=poses, cov=cov)),
         )
+
+    def _fit_bandwidths(self) -> tuple:
+        """The fits' bandwidth per degree of freedom: the estimator's, times
+        `bandwidth_scale`."""
+        return tuple(float(b) * self.bandwidth_scale for b in self.bandwidths)
 
     def metrics(self, method, solution):
         if self.truth is None:
@@ -357,7 +394,7 @@ class VelocityProblem(AbstractProblem):
             "rho_reference": np.asarray(self.rho).tolist(),
             "window_s": list(self.window),
             "estimator_bandwidth_hz": list(self.bandwidths),
-            "fit_bandwidth_hz": list(self.bandwidths),
+            "fit_bandwidth_hz": list(self._fit_bandwidths()),
             "fit_degree": 2,
             "ekf_r_px": max(float(self.noise_px), 0.05),
             "ekf_max_jerk": self.max_jerk,

@@ -75,9 +75,9 @@ class HomographyProblem(AbstractProblem):
     `visjax.geometry.euclidean_reconstruction`'s $G_n$; with `robust`, the command line's
     `--robust`: visjax's RANSAC and Huber-reweighted DLT on all eight points,
     `visjax.geometry.find_homography_robust`, 3 px) and OpenCV's `findHomography` with
-    RANSAC on all eight points (`ransac`, 3 px threshold). Each draw adds `noise_px`
-    of Gaussian noise to the current and to the reference pixels. The observer starts at
-    the identity (the truth is 0.3 away).
+    RANSAC on all eight points (`ransac`, threshold `ransac_px`, default 3 px). Each draw
+    adds `noise_px` of Gaussian noise to the current and to the reference pixels. The
+    observer starts at the identity (the truth is 0.3 away).
 
     Metrics: `error`, the RMS over the second half of $\\|\\hat H H^{-1} - I\\|_F$
     (`homography_error`); `final_error`, that error at the last sample."""
@@ -87,7 +87,9 @@ class HomographyProblem(AbstractProblem):
     label: ClassVar[str] = "RMS of |H_hat H^-1 - I| over the second half (-)"
     trivial_label: ClassVar[str] = "the identity (the reference image's homography)"
     grid: ClassVar[str] = "k_P=3:200:5"
-    own_parameters: ClassVar[dict] = {"estimator": ("k_P",), "dlt": (), "ransac": ()}
+    own_parameters: ClassVar[dict] = {
+        "estimator": ("k_P",), "gyro": ("k_P", "k_I"), "dlt": (), "ransac": ("ransac_px",)
+    }  # fmt: skip
     title: ClassVar[str] = "homography of a planar target (Hamel et al.)"
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
 
@@ -100,8 +102,11 @@ class HomographyProblem(AbstractProblem):
     def parameters(self):
         return {
             "k_P": Parameter(30.0, "1/s", True, "the gain of the innovation"),
-            "k_I": Parameter(10.0, "1/s^2", False, "the integral gain (method gyro)"),
+            "k_I": Parameter(
+                10.0, "1/s^2", False, "the integral gain (method gyro)", span=(0.1, 1000.0)
+            ),
             "noise_px": noise_parameter(self.noise_px),
+            "ransac_px": Parameter(3.0, "px", True, "OpenCV RANSAC's reprojection threshold"),
         }
 
     def settings(self):
@@ -109,7 +114,7 @@ class HomographyProblem(AbstractProblem):
             "noise_px": float(self.noise_px),
             "samples": int(self.scene.ts.shape[0]),
             "points": int(self.scene.reference.shape[0]),
-            "ransac_threshold_px": 3.0,
+            "ransac_threshold_px": 3.0,  # the default of `ransac_px`
             "dlt_points": (
                 f"all points: find_homography_robust ({ROBUST_ITERATIONS} RANSAC hypotheses, "
                 f"{ROBUST_THRESHOLD_PX:g} px, then Huber-reweighted DLT)"
@@ -162,7 +167,7 @@ class HomographyProblem(AbstractProblem):
             G = jnp.where((results == RESULTS.successful)[:, None, None], G, jnp.nan)
             result = _first_failure_over(results)
         elif method == "ransac":
-            G = ransac_homographies(reference, pixels)
+            G = ransac_homographies(reference, pixels, threshold_px=params["ransac_px"])
             ok = jnp.all(jnp.isfinite(G))
             result = RESULTS.where(ok, RESULTS.successful, RESULTS.degenerate_points)
         else:

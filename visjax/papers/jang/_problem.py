@@ -43,10 +43,14 @@ class MovingPointProblem(AbstractProblem):
 
     Parameters: `K` and `Y` (the observer's gains, 3 x 2: the set's published ones, or the
     LMI design for a data file; entries of either sign) and `K_scale`, `Y_scale`,
-    multipliers of them (default 1). Metrics: `rms` (3,) per axis in metres against the
-    true position over the second half of the run (at 1 kHz for the observer, at the
-    frames for the baselines), and `rms_worst`, its largest component (the depth's, in
-    practice).
+    multipliers of them (default 1); the baselines': `window_frames` (`batch_window`'s
+    frames per fit, a structural parameter), `ekf_q` (the EKF's random-walk intensity of
+    the point's velocity, units^2/s^3: the frame interval for a moving set, 0 for a static
+    one, then not tuned) and `ekf_sigma_depth0` (its prior's standard deviation of the
+    depth over the shared depth guess, default 0.5). Metrics: `rms` (3,) per axis in
+    metres against the true position over the second half of the run (at 1 kHz for the
+    observer, at the frames for the baselines), and `rms_worst`, its largest component
+    (the depth's, in practice).
     """
 
     methods = ("estimator", "batch", "batch_window", "ekf")
@@ -55,7 +59,13 @@ class MovingPointProblem(AbstractProblem):
     trivial_label = "the initial depth guess"
     data_parameters = ("noise_px",)
     grid = "K_scale=0.1:10:7,Y_scale=0.1:10:7"
-    own_parameters = {m: () for m in ("batch", "batch_window", "ekf")}
+    structural_parameters = ("window_frames",)
+    own_parameters = {
+        "estimator": ("K", "Y", "K_scale", "Y_scale"),
+        "batch": (),
+        "batch_window": ("window_frames",),
+        "ekf": ("ekf_q", "ekf_sigma_depth0"),
+    }
 
     ts: Float[ArrayLike, " n"]  # the observer's samples (the frames held at 1 kHz for a scene)
     frame_index: Int[ArrayLike, " n"]  # the frame held at each of `ts`
@@ -86,13 +96,30 @@ class MovingPointProblem(AbstractProblem):
         return self.truth is not None
 
     def parameters(self) -> dict[str, Parameter]:
+        q = self._q_velocity()
         return {
             "K": Parameter(as_default(self.observer.K), "", False, "observer gain K (3 x 2)"),
             "Y": Parameter(as_default(self.observer.Y), "", False, "observer gain Y (3 x 2)"),
             "K_scale": Parameter(1.0, "", True, "multiplier of K"),
             "Y_scale": Parameter(1.0, "", True, "multiplier of Y"),
             "noise_px": noise_parameter(self.noise_px),
+            "window_frames": Parameter(
+                float(self.window_frames), "frames", True, "frames per sliding-window fit"
+            ),
+            "ekf_q": Parameter(
+                q,
+                "units^2/s^3",
+                self.moving,
+                "the EKF's velocity random walk",
+                span=(q / 100, q * 100) if q > 0 else None,
+            ),
+            "ekf_sigma_depth0": Parameter(0.5, "", True, "the EKF's prior depth spread / guess"),
         }
+
+    def _q_velocity(self) -> float:
+        # the expected change of the point's velocity: the documented rule of
+        # `moving_point_ekf` (1 unit/s^2 over a frame interval); a static point: none
+        return self.frame_interval if self.moving else 0.0
 
     def gains(self, params) -> dict:
         p = self.resolve(params)
@@ -153,8 +180,8 @@ class MovingPointProblem(AbstractProblem):
                 self._frames(pixels),
                 r_norm=jnp.maximum(self.noise_px, 0.05) / self.Kc[0, 0],
                 depth0=depth0,
-                sigma_depth0=0.5 * depth0,
-                q_velocity=interval if self.moving else 0.0,
+                sigma_depth0=params["ekf_sigma_depth0"] * depth0,
+                q_velocity=params["ekf_q"],
                 sigma_velocity0=2.0 if self.moving else 0.0,
                 substeps=max(1, int(round(interval / 1e-3))),
                 throw=False,

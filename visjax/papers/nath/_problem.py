@@ -26,7 +26,7 @@ from ...estimators import (
 from ...io import StaticPointsData
 from ...plots import plot_feature_estimates
 from ...sim import add_pixel_noise
-from ...studies import AbstractProblem, Parameter, noise_parameter
+from ...studies import AbstractProblem, Parameter, noise_parameter, robust_parameters
 from . import _scene as nath
 
 # the robust settings (a stated choice, not tuned to any result): the Cauchy loss, whose
@@ -70,7 +70,11 @@ class StaticPointsProblem(AbstractProblem):
 
     Parameters: `alpha_scale` multiplies $\\alpha_c$ and $\\alpha$ (eqs. (37), (41)) and
     `gamma_scale` the initial gains $\\eta_0$, $\\eta_1$ and $\\gamma_{s0}$ (eqs. (39),
-    (45)) of the derived gains (Nath et al. publish none for this scene). Metrics: `error`
+    (45)) of the derived gains (Nath et al. publish none for this scene); the baselines':
+    `window_frames` (`batch_window`'s frames per fit, a structural parameter),
+    `ekf_q_rate` (the EKF's process noise rate, `static_points_ekf`'s `q_rate`) and,
+    when `robust`, `robust_scale_px` and `ekf_gate_tail` (`studies.robust_parameters`).
+    Metrics: `error`
     (n,), each unknown feature's final position error (m), and `error_worst`, the largest.
 
     `robust` (the command line's `--robust`): the baselines' robust settings for pixel
@@ -88,7 +92,13 @@ class StaticPointsProblem(AbstractProblem):
     trivial_label = "the initial guess"
     data_parameters = ("noise_px",)
     grid = "alpha_scale=0.1:10:5,gamma_scale=0.1:10:5"
-    own_parameters = {m: () for m in ("batch", "batch_window", "ekf")}
+    structural_parameters = ("window_frames",)
+    own_parameters = {
+        "estimator": ("alpha_scale", "gamma_scale"),
+        "batch": ("robust_scale_px",),
+        "batch_window": ("window_frames", "robust_scale_px"),
+        "ekf": ("ekf_q_rate", "ekf_gate_tail"),
+    }
 
     ts: Float[ArrayLike, " n"]
     R_b: Float[ArrayLike, "n 3 3"]
@@ -126,12 +136,17 @@ class StaticPointsProblem(AbstractProblem):
             "alpha_scale": Parameter(1.0, "", True, "multiplier of alpha_c and alpha"),
             "gamma_scale": Parameter(1.0, "", True, "multiplier of eta0, eta1, gamma_s0"),
             "noise_px": noise_parameter(self.noise_px),
-        }
+            "window_frames": Parameter(
+                float(self.window_frames), "frames", True, "frames per sliding-window fit"
+            ),
+            "ekf_q_rate": Parameter(
+                1e-12, "1/s", True, "the EKF's process noise rate", span=(1e-16, 1e-8)
+            ),
+        } | (robust_parameters(ROBUST_SCALE_PX, ROBUST_GATE) if self.robust else {})
 
     def gains(self, params) -> dict:
-        return {
-            k: float(v) for k, v in self.resolve(params).items() if k not in self.data_parameters
-        }
+        p = self.resolve(params)
+        return {k: float(p[k]) for k in self.own_parameters["estimator"]}
 
     def inputs(self, key):
 
@@ -184,7 +199,7 @@ class StaticPointsProblem(AbstractProblem):
             if method == "batch_window":
                 window["every"] = self.every_frames
             if self.robust:
-                window["loss"] = cauchy(ROBUST_SCALE_PX)
+                window["loss"] = cauchy(params["robust_scale_px"])
                 if method == "batch":
                     window["reject_px"] = ROBUST_REJECT_PX
             sol = bundle_adjustment(est, stream, self.omega_c, throw=False, **window)
@@ -193,7 +208,8 @@ class StaticPointsProblem(AbstractProblem):
         elif method == "ekf":
             sol = static_points_ekf(
                 est, stream, self.omega_c, r_px=jnp.maximum(self.noise_px, 0.05),
-                gate=ROBUST_GATE if self.robust else None, throw=False,
+                q_rate=params["ekf_q_rate"],
+                gate=1.0 - params["ekf_gate_tail"] if self.robust else None, throw=False,
             )  # fmt: skip
             omega_s = sol.outputs.omega_s[-1]
             # the state ends with the features (static_points_ekf)

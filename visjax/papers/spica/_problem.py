@@ -31,7 +31,7 @@ from ...sim import (
     PointDepthScene,
     point_depth_scene,
 )
-from ...studies import AbstractProblem, Parameter, noise_parameter
+from ...studies import AbstractProblem, Parameter, noise_parameter, robust_parameters
 from ._scene import ROBUST_GATE, ROBUST_SCALE_PX
 
 _Projection = Literal["planar", "spherical"]
@@ -64,10 +64,14 @@ class PointDepthProblem(AbstractProblem):
     """The depth of static points from a moving calibrated camera with known velocity
     (Spica et al.'s observer, module docstring), against a sliding-window least-squares
     triangulation on the same measurements (`visjax.baselines.triangulate_point`, the last
-    `window` frames) and an EKF on inverse depth per point (`InverseDepthModel`; planar
-    coordinates for both projections: its prior is the observer's `chi0` with a standard
-    deviation of `chi0`, its measurement noise the problem's pixel noise, at least 0.1 px,
-    its process noise 1e-8 per second on every state).
+    `window` frames, a structural parameter; its warm-up ends at a window whose
+    triangulation angle at the shared depth guess $1/\\chi_0$ is `ls_parallax` pixel-noise
+    angles, `noise_px / f`, default 10, where a window of a few frames gives a depth of
+    either sign) and an EKF on inverse depth per point
+    (`InverseDepthModel`; planar coordinates for both projections: its prior is the
+    observer's `chi0` with a standard deviation of `ekf_sigma_chi0` times `chi0`, default
+    1, its measurement noise the problem's pixel noise, at least 0.1 px, its process noise
+    `ekf_q` per second on every state, default 1e-8).
 
     Metrics: `depth_error` the worst relative depth error over the points at the last
     sample; `time_to_5pct` the first time from which every point's relative error stays
@@ -88,7 +92,12 @@ class PointDepthProblem(AbstractProblem):
     trivial_label: ClassVar[str] = "the initial depth guess"
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
-    own_parameters: ClassVar[dict] = {"least_squares": (), "ekf": ("chi0",)}
+    structural_parameters: ClassVar[tuple[str, ...]] = ("window",)
+    own_parameters: ClassVar[dict] = {
+        "estimator": ("alpha", "h", "chi0"),
+        "least_squares": ("window", "ls_parallax", "robust_scale_px"),
+        "ekf": ("chi0", "ekf_q", "ekf_sigma_chi0", "ekf_gate_tail"),
+    }
     defaults_label: ClassVar[str] = "defaults"  # visjax's own gains, not a paper's
     data_parameters: ClassVar[tuple[str, ...]] = ("noise_px",)
 
@@ -108,9 +117,19 @@ class PointDepthProblem(AbstractProblem):
         return {
             "alpha": Parameter(1000.0, "1/m^2", True, "the inverse depth's gain"),
             "h": Parameter(20.0, "1/s", True, "the measured part's gain, H = h I"),
-            "chi0": Parameter(1.0 / 1.5, "1/m", True, "the initial inverse depth"),
+            # the initial guess every method shares: not tuned (`compare --tune` would
+            # learn the scene's depth from the training seeds)
+            "chi0": Parameter(1.0 / 1.5, "1/m", True, "the initial inverse depth", tunable=False),
             "noise_px": noise_parameter(self.noise_px),
-        }
+            "window": Parameter(float(self.window), "samples", True, "samples per window fit"),
+            "ls_parallax": Parameter(
+                10.0, "noise angles", True, "the least squares' smallest triangulation angle"
+            ),
+            "ekf_q": Parameter(
+                1e-8, "1/s", True, "the EKF's process noise on every state", span=(1e-12, 1e-4)
+            ),
+            "ekf_sigma_chi0": Parameter(1.0, "", True, "the EKF's prior spread / chi0"),
+        } | (robust_parameters(ROBUST_SCALE_PX, ROBUST_GATE) if self.robust else {})
 
     def settings(self):
         return {
@@ -148,11 +167,17 @@ class PointDepthProblem(AbstractProblem):
             return self._ekf(params, inputs)
 
         # the robust loss in normalised coordinates: its pixel scale over the focal length
-        loss = cauchy(ROBUST_SCALE_PX / sc.K[0, 0]) if self.robust else None
+        loss = cauchy(params["robust_scale_px"] / sc.K[0, 0]) if self.robust else None
+
+        # the warm-up ends at a window whose triangulation angle at the shared depth guess
+        # (1 / chi0) is `ls_parallax` pixel-noise angles
+        min_baseline = params["ls_parallax"] * self.noise_px / sc.K[0, 0] / params["chi0"]
 
         def one(pixels):
             stream = moving_point_stream(sc.ts, pixels, sc.twists, sc.K, throw=False)
-            sol = triangulate_point(stream, window=self.window, loss=loss, throw=False)
+            sol = triangulate_point(
+                stream, window=self.window, loss=loss, min_baseline=min_baseline, throw=False
+            )
             m, cov = sol.outputs.position, sol.diagnostics.cov
             if self.projection == "spherical":
                 # the distance |m|, to first order: var = u^T C u, u = m / |m|
@@ -176,13 +201,15 @@ class PointDepthProblem(AbstractProblem):
         sc = self.scene
         focal = sc.K[0, 0]
         sigma = jnp.maximum(self.noise_px, 0.1)
-        model = InverseDepthModel(q_s=1e-8, q_chi=1e-8, r=(sigma / focal) ** 2)
+        q = params["ekf_q"]
+        model = InverseDepthModel(q_s=q, q_chi=q, r=(sigma / focal) ** 2)
         chi0 = params["chi0"]
 
         def one(pixels):
             m = pixel_to_normalized(pixels, sc.K)
             x0 = jnp.stack([m[0, 0], m[0, 1], chi0])
-            P0 = jnp.diag(jnp.stack([model.r, model.r, chi0**2]))
+            sd_chi = params["ekf_sigma_chi0"] * chi0
+            P0 = jnp.diag(jnp.stack([model.r, model.r, sd_chi**2]))
             sol = extended_kalman_filter(model, sc.ts, m, sc.twists, x0, P0, gate=gate, throw=False)
             chi = sol.outputs.x[:, 2]
             # the depth's standard deviation from the inverse depth's, to first order:
@@ -196,7 +223,7 @@ class PointDepthProblem(AbstractProblem):
             std = jnp.where(jnp.isfinite(depth), std, jnp.nan)
             return depth, sol.result, std
 
-        gate = ROBUST_GATE if self.robust else None
+        gate = 1.0 - params["ekf_gate_tail"] if self.robust else None
         depth, results, std = jax.vmap(one, in_axes=1, out_axes=(1, 0, 1))(inputs)
         return LeastSquaresDepth(
             ts=sc.ts,
