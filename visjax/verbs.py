@@ -100,8 +100,8 @@ def check_study(r: Request) -> list:
     `Refused`, one line."""
     return studies.check_study(
         r.command, registered(r.problem).name, r.problems, spec=r.grid, seeds=r.seeds,
-        study=Study(chunk=r.chunk, shard=r.job), steps=r.steps if r.command == "tune" else 0,
-        variants=len(r.variants) if r.variants else 1,
+        study=Study(chunk=r.chunk, shard=r.job), variants=len(r.variants) if r.variants else 1,
+        steps={"tune": r.steps, "compare": r.budget * r.tune}.get(r.command, 0),
         methods=[r.method] if r.command == "run" else r.methods,
     )  # fmt: skip
 

@@ -433,15 +433,16 @@ def test_point_depth_ekf():
     problem = spica.point_depth_problem(noise_px=0.5, duration=N / 50.0, rate_hz=50.0)
     sc = problem.scene
     pixels = problem.inputs(jax.random.key(3))
-    chi0 = problem.parameters()["chi0"].default
-    depth = problem.solve("ekf", {"alpha": 1000.0, "h": 20.0, "chi0": chi0}, pixels).depth
+    params = problem.resolve()  # every default: the prior's spread 0.5 chi0, q 1e-8
+    chi0, sd = problem.parameters()["chi0"].default, 0.5 * params["chi0"]
+    depth = problem.solve("ekf", params, pixels).depth
     # the problem's construction (`PointDepthProblem._ekf`), one point at a time
     model = spica.InverseDepthModel(q_s=1e-8, q_chi=1e-8, r=(0.5 / sc.K[0, 0]) ** 2)
     run = jax.jit(extended_kalman_filter, static_argnames=("throw",))
     for i in range(pixels.shape[1]):
         m = pixel_to_normalized(pixels[:, i], sc.K)
         x0 = jnp.stack([m[0, 0], m[0, 1], jnp.asarray(chi0)])
-        P0 = jnp.diag(jnp.stack([model.r, model.r, jnp.asarray(chi0) ** 2]))
+        P0 = jnp.diag(jnp.stack([model.r, model.r, sd**2]))
         sol = run(model, sc.ts, m, sc.twists, x0, P0, throw=False)
         assert sol.result == RESULTS.successful
         # the same filter as the problem's (its depth is 1 / chi)

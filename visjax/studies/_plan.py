@@ -54,11 +54,12 @@ class Plan:
 
 
 def study_runs(kind: str, points: int, seeds: int, steps: int = 0, methods: int = 1) -> int:
-    """The runs of a study: compare, every method over the keys; sweep, the grid over the
-    keys and the held-out runs (the best point and the defaults); tune, also the tuned
-    point and `steps` evaluations over the keys."""
+    """The runs of a study: compare, every method over the keys (tuned first, `--tune`:
+    `steps` the budget, evaluations of each method over as many training keys); sweep,
+    the grid over the keys and the held-out runs (the best point and the defaults); tune,
+    also the tuned point and `steps` evaluations over the keys."""
     if kind == "compare":
-        return seeds * methods
+        return seeds * methods * (1 + steps)
     if kind == "sweep":
         return points * seeds + 2 * seeds
     return points * seeds + steps * seeds + 3 * seeds
@@ -133,6 +134,7 @@ def check_study(
     if count is not None:
         what = f"{count} grid points x {seeds} seeds" if spec else f"{seeds} seeds"
         what += f" and {steps} steps" if kind == "tune" else ""
+        what += f" and a tuning budget of {steps}" if kind == "compare" and steps else ""
         check_run_count(kind, variants * study_runs(kind, count, seeds, steps), what)
     built, total = build(), 0
     for tag, p in built:

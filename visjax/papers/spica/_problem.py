@@ -70,7 +70,7 @@ class PointDepthProblem(AbstractProblem):
     either sign) and an EKF on inverse depth per point
     (`InverseDepthModel`; planar coordinates for both projections: its prior is the
     observer's `chi0` with a standard deviation of `ekf_sigma_chi0` times `chi0`, default
-    1, its measurement noise the problem's pixel noise, at least 0.1 px, its process noise
+    0.5, its measurement noise the problem's pixel noise, at least 0.1 px, its process noise
     `ekf_q` per second on every state, default 1e-8).
 
     Metrics: `depth_error` the worst relative depth error over the points at the last
@@ -128,7 +128,10 @@ class PointDepthProblem(AbstractProblem):
             "ekf_q": Parameter(
                 1e-8, "1/s", True, "the EKF's process noise on every state", span=(1e-12, 1e-4)
             ),
-            "ekf_sigma_chi0": Parameter(1.0, "", True, "the EKF's prior spread / chi0"),
+            # two standard deviations from chi0 to 0: the prior within the model's valid set
+            # (chi > 0); at 1, a sixth of it is behind the camera and the first updates, at
+            # a parallax below the noise, take chi across 0 on many draws (`diverged`)
+            "ekf_sigma_chi0": Parameter(0.5, "", True, "the EKF's prior spread / chi0"),
         } | (robust_parameters(ROBUST_SCALE_PX, ROBUST_GATE) if self.robust else {})
 
     def settings(self):
