@@ -156,3 +156,18 @@ def test_compare_tune_on_the_command_line(toy, tmp_path):
     assert set(tuning["methods"]) == {"gain", "fixed"}
     history = pd.read_parquet(tmp_path / "tuning.parquet")
     assert len(history) == 8 + 1
+
+
+def test_a_problem_with_an_added_method_searches_its_structure_as_its_own(toy):
+    """With a method added (`WithMethods`), the problem's structural parameters are still
+    searched as whole numbers on their grid, and the added method's parameter with the
+    same budget."""
+
+    def half(problem, params, inputs):
+        return Value(jnp.abs(params["scale"] - 2.0) + inputs, RESULTS.successful)
+
+    scale = studies.Parameter(1.0, "", True, "a scale", span=(0.5, 8.0))
+    added = studies.WithMethods(toy, (studies.Method("half", half, (("scale", scale),)),))
+    tuning = studies.tune_methods(added, np.arange(3), methods=["window", "half"], budget=32)
+    assert tuning["window"].params == {"size": 8.0} and tuning["half"].evaluations == 32
+    assert abs(tuning["half"].params["scale"] - 2.0) < 0.3

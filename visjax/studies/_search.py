@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ._compare import compare
+from ._methods import WithMethods
 from ._problem import AbstractProblem, evaluate
 from ._study import Result, Study, study_of
 
@@ -137,6 +138,9 @@ def _candidates(problem, searched: Mapping[str, tuple], budget: int, seed: int) 
     specs = problem.parameters()
     names = list(searched)
     default = {n: float(specs[n].value) for n in names}
+    own = problem
+    while isinstance(own, WithMethods):  # the static fields are the problem's own
+        own = own.base
     points = [dict(default)]
     if budget > 1:
         u = qmc.Halton(d=len(names), scramble=True, seed=seed).random(budget - 1)
@@ -149,7 +153,7 @@ def _candidates(problem, searched: Mapping[str, tuple], budget: int, seed: int) 
                     step = np.log(2.0) / 2  # a grid of ratios sqrt 2 from the default
                     k = np.round((np.log(value) - np.log(default[n])) / step)
                     value = default[n] * float(np.exp(k * step))
-                    if isinstance(getattr(problem, n, None), int):
+                    if isinstance(getattr(own, n, None), int):
                         value = float(max(1, round(value)))
                 point[n] = value
             points.append(point)
