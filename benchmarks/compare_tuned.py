@@ -8,7 +8,7 @@ printed with the results. Prints JSON (docs/baselines.md, the problems' pages).
 
     python benchmarks/compare_tuned.py [--seeds 5] [--budget 16] [--noise 0.5]
         [--problems point_depth homography moving_point static_points velocity]
-        [--partial FILE]
+        [--partial FILE] [--methods a,b]
 
 `--partial FILE`: the report so far, rewritten after each problem (a long run keeps what
 it finished).
@@ -53,6 +53,7 @@ def main():
     parser.add_argument("--noise", type=float, default=0.5)
     parser.add_argument("--problems", nargs="*", default=list(PROBLEMS), choices=PROBLEMS)
     parser.add_argument("--partial", default=None)
+    parser.add_argument("--methods", default=None, help="a,b: these methods only")
     args = parser.parse_args()
     test, train = np.arange(args.seeds), np.arange(args.seeds, 2 * args.seeds)
     report = {"seeds": test.tolist(), "train_seeds": train.tolist(), "budget": args.budget}
@@ -61,10 +62,12 @@ def main():
         options = OPTIONS.get(name, {})
         problem = studies.problem(name, noise_px=args.noise, **options)
         started = time.perf_counter()
-        untuned = studies.compare(problem, test)
-        records, tuning = studies.compare_tuned(problem, test, train, args.budget)
+        methods = None if args.methods is None else args.methods.split(",")
+        untuned = studies.compare(problem, test, methods=methods)
+        records, tuning = studies.compare_tuned(problem, test, train, args.budget, methods=methods)
         report["problems"][name] = {
-            "options": options, "metric": problem.metric, "settings": problem.settings(),
+            "options": options, "methods": methods, "metric": problem.metric,
+            "settings": problem.settings(),
             "untuned": table(problem, untuned, 0), "tuned": table(problem, records, 0),
             "tuning": tuning.as_json(), "wall_s": time.perf_counter() - started,
         }  # fmt: skip
