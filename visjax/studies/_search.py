@@ -210,10 +210,15 @@ def tune_methods(
     bar = tqdm(total=total, desc="tune", unit="evaluation", disable=not study.progress)
     out = Tuning()
     for m, (searched, points) in plans.items():
-        history, best, best_score = [], points[0], None
+        history, best, best_score, seen = [], points[0], None, {}
         for i, point in enumerate(points):
-            ev = evaluate(problem, point, keys, method=m)
-            score = _score(ev.metrics[problem.metric])
+            # a structural parameter's grid repeats points: each is run once (the budget
+            # counts it every time, as the sequence drew it)
+            at = tuple(point.items())
+            if at not in seen:
+                ev = evaluate(problem, point, keys, method=m)
+                seen[at] = _score(ev.metrics[problem.metric])
+            score = seen[at]
             history.append({"evaluation": i, **point, "failed": score[0], "median": score[1]})
             if best_score is None or _key(score) < _key(best_score):
                 best, best_score = point, score
