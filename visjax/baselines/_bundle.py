@@ -400,7 +400,7 @@ def static_points_ekf(
     sigma_offset: float | ArrayLike = 0.05,
     sigma_feature: float | ArrayLike = 0.1,
     q_rate: float | ArrayLike = 1e-12,
-    gate: float | None = None,
+    gate: float | ArrayLike | None = None,
     throw: bool = True,
 ) -> Solution:
     """An extended Kalman filter over the camera parameters and the unknown features, the

@@ -68,7 +68,7 @@ def ransac_homographies(
     reference: Float[ArrayLike, "n 2"],
     pixels: Float[ArrayLike, "N n 2"],
     *,
-    threshold_px: float = 3.0,
+    threshold_px: float | ArrayLike = 3.0,
 ) -> Float[Array, "N 3 3"]:
     """OpenCV's `cv2.findHomography(reference, pixels[k], cv2.RANSAC, threshold_px)` at each
     frame, through `jax.pure_callback` (so it runs under `jit` and `vmap`, one frame after

@@ -415,10 +415,10 @@ def moving_point_ekf(
     r_norm: Float[ArrayLike, ""],
     depth0: Float[ArrayLike, ""],
     sigma_depth0: Float[ArrayLike, ""],
-    q_velocity: float,
-    sigma_velocity0: float = 0.0,
+    q_velocity: float | ArrayLike,
+    sigma_velocity0: float | ArrayLike = 0.0,
     substeps: int = 1,
-    gate: float | None = None,
+    gate: float | ArrayLike | None = None,
     throw: bool = True,
 ) -> Solution:
     """An extended Kalman filter of the point's inverse-depth coordinates and velocity (the

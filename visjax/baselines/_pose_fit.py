@@ -506,10 +506,10 @@ def velocity_ekf(
     camera: FixedCamera,
     *,
     r_px: Float[ArrayLike, ""] = 0.5,
-    max_jerk: float = 1.0,
-    max_angular_jerk: float = 1.0,
-    sigma_velocity: float = 1.0,
-    gate: float | None = None,
+    max_jerk: float | ArrayLike = 1.0,
+    max_angular_jerk: float | ArrayLike = 1.0,
+    sigma_velocity: float | ArrayLike = 1.0,
+    gate: float | ArrayLike | None = None,
     throw: bool = True,
 ) -> Solution:
     """An extended Kalman filter of the object's pose and twist with a constant-acceleration
