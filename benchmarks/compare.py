@@ -17,6 +17,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
+import visjax  # noqa: E402
 from visjax import studies  # noqa: E402
 
 NOISE = (0.0, 0.1, 0.5)
@@ -42,6 +43,7 @@ def main():
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--problems", nargs="*", default=list(PROBLEMS), choices=PROBLEMS)
     args = parser.parse_args()
+    visjax.apply_xla_cpu_workarounds()  # batched LAPACK calls can hang on jaxlib 0.10
     report = {"seeds": args.seeds, "problems": {}}
     for name in args.problems:
         per_noise = {}

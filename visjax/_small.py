@@ -115,6 +115,30 @@ def inv3(B):
     return adj / dot(adj[0], B[:, 0])
 
 
+def spd_solve(G, b):
+    """The solution $x$ of $G x = b$ for a small symmetric positive definite `G` (n, n) and
+    `b` (n,), by Gaussian elimination without pivoting ($G = L D L^T$), unrolled over the
+    static `n`: elementwise operations only (under `vmap` on a CPU, `jnp.linalg.solve`
+    is a batched LAPACK call per matrix, and two such calls in one program can hang on
+    jaxlib 0.10: `apply_xla_cpu_workarounds`). Exact for SPD `G` up to rounding; no
+    check of definiteness (a zero pivot gives non-finite values)."""
+    n = G.shape[-1]
+    A = [[G[..., i, j] for j in range(n)] for i in range(n)]
+    y = [b[..., i] for i in range(n)]
+    for k in range(n):  # forward elimination
+        for i in range(k + 1, n):
+            f = A[i][k] / A[k][k]
+            A[i] = [A[i][j] - f * A[k][j] if j >= k else A[i][j] for j in range(n)]
+            y[i] = y[i] - f * y[k]
+    x = [None] * n
+    for i in reversed(range(n)):  # back substitution
+        s = y[i]
+        for j in range(i + 1, n):
+            s = s - A[i][j] * x[j]
+        x[i] = s / A[i][i]
+    return jnp.stack(x, axis=-1)
+
+
 _UNROLL = 64  # longer axes keep XLA's reduction
 
 

@@ -29,6 +29,7 @@ import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, all_finite, raise_or_keep
+from .._small import spd_solve
 from .._util import as_float, check_shape
 from ..estimators import FixedCamera, Solution, VelocityOutput
 from ..geometry import euclidean_reconstruction, so3_exp, so3_log
@@ -283,8 +284,12 @@ def _derivative_rows(ok, ts, half_width, degree, causal):
         # fewer frames than degree + 1 (the start of a causal fit): the degree drops to
         # count - 1; one frame gives a zero slope (no motion seen yet)
         unused = (jnp.arange(degree + 1) >= count).astype(ts.dtype)
-        G = (V * w[:, None]).T @ V + jnp.diag(unused)
-        c = jnp.linalg.solve(G, (V * w[:, None]).T)[1] / scale  # d/dt at tau = 0
+        Vw = V * w[:, None]
+        G = Vw.T @ V + jnp.diag(unused)
+        # the slope at tau = 0 is row 1 of G^-1 (V w)^T, i.e. (V w) G^-1 e_1 (G symmetric):
+        # one small solve, elementwise (`spd_solve`), not a batched LAPACK call per frame
+        e1 = (jnp.arange(degree + 1) == 1).astype(ts.dtype)
+        c = Vw @ spd_solve(G, e1) / scale  # d/dt at tau = 0
         c = jnp.where(use, c, 0.0)
         return idx, use, jnp.where((count >= 1) & ok[k], c, jnp.nan)
 

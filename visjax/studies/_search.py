@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from .._xla_workaround import warn_if_hang_prone
 from ._compare import compare
 from ._methods import WithMethods
 from ._problem import AbstractProblem, evaluate
@@ -200,6 +201,8 @@ def tune_methods(
         raise ValueError(f"`keys` must be a non-empty 1-D array of int seeds; got {keys!r}.")
     study = study_of(study, "tune")
     chosen = problem.check_methods(methods)
+    if keys.size > 1:  # each evaluation is a vmap over the training seeds
+        warn_if_hang_prone()
     plans = {}
     for m in chosen:
         searched = searched_parameters(problem, m)
