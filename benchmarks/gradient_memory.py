@@ -36,6 +36,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
+import visjax  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     CheckpointAdjoint,
     DirectAdjoint,
@@ -148,6 +149,7 @@ def one_duration(duration: float, batch: int) -> dict:
 
 
 def main():
+    visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     parser = argparse.ArgumentParser()
     parser.add_argument("--durations", default="1 3 10 30", help="seconds, space-separated")
     parser.add_argument("--batch", type=int, default=1, help="gain settings vmapped")

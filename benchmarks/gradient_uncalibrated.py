@@ -28,6 +28,7 @@ jax.config.update("jax_enable_x64", True)
 
 from _memory import peak_rss_mb  # noqa: E402
 
+import visjax  # noqa: E402
 from visjax import papers  # noqa: E402
 from visjax.estimators import CheckpointAdjoint, DirectAdjoint  # noqa: E402
 
@@ -48,6 +49,7 @@ def xla_bytes(compiled):
 
 
 def main():
+    visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=30.0, help="seconds at 1 kHz")
     parser.add_argument("--batch", type=int, default=256, help="gain settings vmapped")

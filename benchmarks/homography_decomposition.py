@@ -21,6 +21,7 @@ import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 
+import visjax  # noqa: E402
 from visjax.geometry import decompose_homography, find_homography  # noqa: E402
 from visjax.sim import random_planar_scenes  # noqa: E402
 
@@ -31,6 +32,7 @@ def per_frame(p_ref, p_cur, A):
 
 
 def main():
+    visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     parser = argparse.ArgumentParser()
     parser.add_argument("--frames", type=int, default=10_000)
     parser.add_argument("--repeats", type=int, default=5)

@@ -49,6 +49,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the tests' helpers
 
+import visjax  # noqa: E402
 from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
 from visjax import papers  # noqa: E402
 from visjax.estimators import (  # noqa: E402
@@ -81,6 +82,7 @@ def timed(f, *args, repeats):
 
 
 def main():
+    visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch", type=int, default=1024)
     parser.add_argument("--duration", type=float, default=1.0, help="seconds at 1 kHz")

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import visjax
 from visjax.estimators import (
     SaveAt,
     StaticPointsEstimator,
@@ -108,6 +109,7 @@ def run_scene(sc: dict, noise_px: float, seed: int = 0) -> dict:
 
 
 def main():
+    visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     jax.config.update("jax_enable_x64", True)
     parser = argparse.ArgumentParser()
     parser.add_argument("--duration", type=float, default=40.0)

@@ -24,6 +24,8 @@ sys.path.insert(0, sys.argv[5])
 from _memory import peak_rss_mb
 import jax, jax.numpy as jnp, numpy as np
 jax.config.update("jax_enable_x64", True)
+import visjax
+visjax.apply_xla_cpu_workarounds()
 from visjax import papers, studies
 
 batch, duration = int(sys.argv[1]), float(sys.argv[2])

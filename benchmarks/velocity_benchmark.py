@@ -34,6 +34,7 @@ import numpy as np
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the tests' helpers
 
+import visjax  # noqa: E402
 from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     FixedCamera,
@@ -61,6 +62,7 @@ def timed(f, *args, repeats):
 
 
 def main():
+    visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     parser = argparse.ArgumentParser()
     parser.add_argument("--batch", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=5)

@@ -25,6 +25,7 @@ jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(Path(__file__).parents[1] / "examples"))
 from make_example_data import velocity_example  # noqa: E402
 
+import visjax  # noqa: E402
 from visjax import RESULTS  # noqa: E402
 from visjax.estimators import (  # noqa: E402
     VelocityEstimator,
@@ -151,6 +152,7 @@ def study(duration: float, seeds: int) -> dict:
 
 
 def main(argv=None):
+    visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--duration", type=float, default=10.0)
     p.add_argument("--seeds", type=int, default=4)
