@@ -1,5 +1,6 @@
 """Determinants, inverses and the symmetric eigendecomposition of 2x2 and 3x3 matrices in
-closed form.
+closed form, and the solve of a small symmetric positive definite system by unrolled
+elimination (`spd_solve`).
 
 Under `vmap` on a CPU, `jnp.linalg.det`, `inv` and `solve` of a 3x3 matrix go through a
 batched LU factorisation (a LAPACK call per matrix); these are a few dozen fused flops.
