@@ -31,6 +31,9 @@ cheaper on a CPU; the noise differs, its distribution does not). A study's noise
 generator is the user's choice: `jax.random.key(seed, impl="rbg")`.
 
     python benchmarks/monte_carlo.py [--batch 1024] [--duration 1.0] [--chunk 16]
+        [--dtype float64|float32]
+
+The JSON records the device and the dtype (`_device.device_fields`).
 """
 
 import argparse
@@ -46,8 +49,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # the tests' helpers
+
+from _device import add_dtype_option, device_fields, use_dtype  # noqa: E402
 
 import visjax  # noqa: E402
 from tests.reference_velocity import numpy_velocity_estimator  # noqa: E402
@@ -81,6 +85,27 @@ def timed(f, *args, repeats):
     return first, statistics.median(times)
 
 
+def raw_study(duration, chunk):
+    """The study written directly on the estimator and stream builders (no problem, no
+    runner around it): `jit(vmap(one))` over noise keys, and what the references reuse."""
+    sc = section6_scenario(duration, 1000.0)
+    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
+    stream0 = velocity_stream(sc.ts, sc.pixels, camera)
+    n_star, z1_star = camera.n_star, camera.z1_star
+    reducer = WindowRMS(0.5 * duration, duration + 1e-9, field="v_hat")
+    est = VelocityEstimator(K=K_EQ63, rho=RHO_EQ63)
+
+    def one(key):
+        noise = 0.1 * jax.random.normal(key, sc.pixels.shape, dtype=sc.pixels.dtype)
+        pixels = sc.pixels + noise
+        camera = FixedCamera(pixels[0], sc.A, sc.R_star, sc.s[0], n_star, z1_star)
+        stream = velocity_stream(sc.ts, pixels, camera, truth=sc.velocity, throw=False, chunk=chunk)
+        sol = run(est, stream, saveat=SaveAt(outputs=False), reducer=reducer, throw=False)
+        return sol.summary.rms, sol.result._value
+
+    return jax.jit(jax.vmap(one)), stream0, n_star, z1_star, reducer
+
+
 def main():
     visjax.apply_xla_cpu_workarounds()  # as the command line does (jaxlib 0.10's CPU options)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -90,31 +115,15 @@ def main():
         "--chunk", type=int, default=16, help="frames per fused chunk (16: fastest at batch 1,024)"
     )
     parser.add_argument("--repeats", type=int, default=3)
+    add_dtype_option(parser)
     args = parser.parse_args()
 
+    use_dtype(args.dtype)
     sc = section6_scenario(args.duration, 1000.0)
     steps = sc.ts.shape[0]
     setup = papers.velocity_problem(noise_px=0.1, duration=args.duration, chunk=args.chunk)
     keys = jax.random.split(jax.random.key(0), args.batch)
-
-    # the study, with the chunk size of the fused preprocessing set here
-    camera = fixed_camera(sc.pixels, sc.A, sc.R_star, sc.s[0])
-    stream0 = velocity_stream(sc.ts, sc.pixels, camera)
-    n_star, z1_star = camera.n_star, camera.z1_star
-    reducer = WindowRMS(0.5 * args.duration, args.duration + 1e-9, field="v_hat")
-    est = VelocityEstimator(K=K_EQ63, rho=RHO_EQ63)
-
-    def one(key):
-        noise = 0.1 * jax.random.normal(key, sc.pixels.shape, dtype=sc.pixels.dtype)
-        pixels = sc.pixels + noise
-        camera = FixedCamera(pixels[0], sc.A, sc.R_star, sc.s[0], n_star, z1_star)
-        stream = velocity_stream(
-            sc.ts, pixels, camera, truth=sc.velocity, throw=False, chunk=args.chunk
-        )
-        sol = run(est, stream, saveat=SaveAt(outputs=False), reducer=reducer, throw=False)
-        return sol.summary.rms, sol.result._value
-
-    study = jax.jit(jax.vmap(one))
+    study, stream0, n_star, z1_star, reducer = raw_study(args.duration, args.chunk)
     study_first, study_s = timed(study, keys, repeats=args.repeats)
     rms, codes = study(keys)
     failed = int(np.sum(np.asarray(codes) != 0))
@@ -177,7 +186,7 @@ def main():
                 "benchmark": "monte_carlo_velocity_noise_study",
                 "machine": platform.processor() or platform.machine(),
                 "jax": jax.__version__,
-                "dtype": "float64",
+                **device_fields(args.dtype),
                 "batch": args.batch,
                 "steps_per_trajectory": steps,
                 "chunk": args.chunk,

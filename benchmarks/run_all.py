@@ -8,9 +8,20 @@ in docs/performance.md from that file alone (`--table-only` redoes the table fro
 existing file without running anything; `--no-table` leaves the page alone).
 
     python benchmarks/run_all.py [--quick] [--only NAME ...] [--table-only] [--no-table]
+    python benchmarks/run_all.py --check [--only NAME ...]
 
 `--quick` runs every benchmark on small sizes (a smoke test of the scripts, minutes);
 the documented numbers come from a full run.
+
+The file keeps each device's figures side by side under its name (`devices`: "cpu:
+x86_64, 2 CPUs", "gpu: NVIDIA H200", `_device.device_name`); a run replaces the figures of
+the device it runs on and keeps the others'. Timings are recorded as ratios against a
+reference timed in the same run (`checked_ratios`: every number whose key names a
+speedup, a ratio or an `_over_`), and `--check` re-measures them: it runs the benchmarks
+again on this device, at the sizes recorded, and exits with 1 when a ratio is more than
+`TOLERANCE` (25%) off the recorded one (or this device has none recorded), printing each
+ratio then and now. A commit that changes a hot path updates the file from a run on the
+same machine in the same session.
 """
 
 import argparse
@@ -19,6 +30,7 @@ import json
 import os
 import pathlib
 import platform
+import re
 import subprocess
 import sys
 
@@ -55,6 +67,65 @@ BENCHMARKS = {
     ),
     "vs_gtsam": ("vs_gtsam.py", [], ["--problems", "16", "--repeats", "1"]),
 }
+
+
+TOLERANCE = 0.25  # --check: the largest relative change of a recorded ratio
+_RATIO = re.compile(r"(^|_)(speedup|ratio)(_|$)|_over_")
+_ROW_ID = ("batch", "estimator", "outlier_fraction", "name")
+
+
+def checked_ratios(result, prefix="") -> dict[str, float]:
+    """The ratios `--check` compares, by a path label (`gain_sweep.batches[batch=1024].
+    ratio_to_bare_update`): every number whose key names a speedup, a ratio or an
+    `_over_` (a timing against a reference of the same run, or a memory figure against
+    its reference), found anywhere in a benchmark's JSON."""
+    out = {}
+    if isinstance(result, dict):
+        for k, v in result.items():
+            if k in ("target", "targets", "command"):
+                continue
+            path = f"{prefix}.{k}" if prefix else k
+            if isinstance(v, (int, float)) and not isinstance(v, bool) and _RATIO.search(k):
+                out[path] = float(v)
+            elif isinstance(v, (dict, list)):
+                out.update(checked_ratios(v, path))
+    elif isinstance(result, list):
+        for i, v in enumerate(result):
+            ident = next((f for f in _ROW_ID if isinstance(v, dict) and f in v), None)
+            label = f"{prefix}[{ident}={v[ident]}]" if ident else f"{prefix}[{i}]"
+            out.update(checked_ratios(v, label))
+    return out
+
+
+def check(recorded: dict, measured: dict, tolerance: float = TOLERANCE) -> list[dict]:
+    """Each recorded ratio against the same ratio measured again: one row per ratio with
+    `recorded`, `measured`, `change` (relative) and `ok` (within `tolerance`); a ratio
+    missing from the new run, or a benchmark that failed, is a row that is not ok."""
+    rows = []
+    for name, old in recorded.items():
+        new = measured.get(name)
+        if new is None:
+            continue  # not re-run (--only)
+        if "error" in new:
+            rows.append({"ratio": name, "recorded": None, "measured": None, "change": None,
+                         "ok": False, "error": new["error"]})  # fmt: skip
+            continue
+        now = checked_ratios(new, name)
+        for label, value in checked_ratios(old, name).items():
+            got = now.get(label)
+            change = None if got is None or value == 0 else (got - value) / abs(value)
+            ok = change is not None and abs(change) <= tolerance
+            rows.append({"ratio": label, "recorded": value, "measured": got,
+                         "change": change, "ok": ok})  # fmt: skip
+    return rows
+
+
+def device_record(results: dict, device: str) -> dict | None:
+    """This device's record of a results file (a file of the one-device layout is the
+    record of the device it names in `machine`)."""
+    if "devices" in results:
+        return results["devices"].get(device)
+    return results if "benchmarks" in results else None
 
 
 def run_one(name, quick):
@@ -282,14 +353,25 @@ def table(results: dict) -> str:
     return "\n".join(lines)
 
 
+def tables(results: dict) -> str:
+    """One performance table per device of a results file (the CPU's first)."""
+    if "devices" not in results:
+        return table(results)
+    names = sorted(results["devices"], key=lambda n: (not n.startswith("cpu"), n))
+    parts = []
+    for name in names:
+        parts += [f"**{name}**", "", table(results["devices"][name]), ""]
+    return "\n".join(parts).rstrip()
+
+
 def write_table(results: dict, page: pathlib.Path = PERFORMANCE_PAGE) -> None:
-    """Replace the table between the markers of `page` with `table(results)`."""
+    """Replace the table between the markers of `page` with `tables(results)`."""
     text = page.read_text()
     if START not in text or END not in text:
         raise SystemExit(f"{page} has no {START} ... {END} markers.")
     head, rest = text.split(START, 1)
     _, tail = rest.split(END, 1)
-    page.write_text(f"{head}{START}\n{table(results)}\n{END}{tail}")
+    page.write_text(f"{head}{START}\n{tables(results)}\n{END}{tail}")
 
 
 def main():
@@ -316,27 +398,73 @@ def main():
         action="store_true",
         help="leave docs/performance.md alone (--no-readme: the former name)",
     )
+    parser.add_argument(
+        "--check",
+        action="store_true",
+        help=f"re-measure the recorded ratios of this device; exit 1 if one is more than "
+        f"{TOLERANCE:.0%} off (nothing is written)",
+    )
     args = parser.parse_args()
     if args.table_only:
         results = json.loads(args.out.read_text())
-    else:
-        import jax
+        print(json.dumps(results, indent=2))
+        if not args.no_table:
+            write_table(results)
+        return 0
+    import jax
 
-        previous = json.loads(args.out.read_text()) if args.only and args.out.exists() else {}
-        results = {
-            "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {jax.devices()[0].platform}",
-            "jax": jax.__version__,
-            "date": datetime.date.today().isoformat(),
-            "quick": args.quick,
-            "benchmarks": previous.get("benchmarks", {}),
-        }
-        for name in args.only or BENCHMARKS:
-            results["benchmarks"][name] = run_one(name, args.quick)
-            args.out.write_text(json.dumps(results, indent=2) + "\n")
+    sys.path.insert(0, str(HERE))
+    from _device import device_name
+
+    device = device_name()
+    stored = json.loads(args.out.read_text()) if args.out.exists() else {}
+    devices = dict(stored.get("devices", {}))
+    if "benchmarks" in stored:  # the one-device layout of earlier files: its CPU record
+        devices.setdefault(_legacy_device(stored), {k: v for k, v in stored.items()})
+    mine = devices.get(device)
+    if args.check:
+        if mine is None:
+            print(f"[run_all] no figures recorded for {device!r} in {args.out}: run without "
+                  "--check first", file=sys.stderr)  # fmt: skip
+            return 1
+        names = [n for n in (args.only or mine["benchmarks"]) if n in BENCHMARKS]
+        measured = {n: run_one(n, mine.get("quick", False)) for n in names}
+        rows = check({n: mine["benchmarks"][n] for n in names if n in mine["benchmarks"]},
+                     measured)  # fmt: skip
+        print(json.dumps({"device": device, "tolerance": TOLERANCE, "ratios": rows}, indent=2))
+        bad = [r for r in rows if not r["ok"]]
+        for r in bad:
+            print(f"[run_all] {r['ratio']}: recorded {r['recorded']}, now {r['measured']}",
+                  file=sys.stderr)  # fmt: skip
+        return 1 if bad or not rows else 0
+    previous = mine if (args.only and mine) else {}
+    record = {
+        "machine": f"{platform.machine()}, {os.cpu_count()} CPUs, {jax.devices()[0].platform}",
+        "device": device,
+        "jax": jax.__version__,
+        "date": datetime.date.today().isoformat(),
+        "quick": args.quick,
+        "benchmarks": dict(previous.get("benchmarks", {})),
+    }
+    devices[device] = record
+    results = {"devices": devices}
+    for name in args.only or BENCHMARKS:
+        record["benchmarks"][name] = run_one(name, args.quick)
+        args.out.write_text(json.dumps(results, indent=2) + "\n")
     print(json.dumps(results, indent=2))
     if not args.no_table:
         write_table(results)
+    return 0
+
+
+def _legacy_device(stored: dict) -> str:
+    """The device name of a file of the one-device layout ("x86_64, 2 CPUs, cpu")."""
+    machine = stored.get("machine", "")
+    parts = [p.strip() for p in machine.split(",")]
+    if len(parts) == 3 and parts[2] == "cpu":
+        return f"cpu: {parts[0]}, {parts[1]}"
+    return machine or "unknown"
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -156,6 +156,8 @@ def verb(sub, name, help, *, seeds, noise, grid):
     arg(p, "--set", None, None, "a variant (moving_point: I.1 ... II.3)", action="append")
     robust = "the problem's robust settings (robust losses, outlier gates; not moving_point)"
     arg(p, "--robust", help=robust, action="store_true")
+    dtype = "float64 (default: the papers' accuracy) or float32 (docs/gpu.md: its accuracy)"
+    arg(p, "--dtype", None, "float64", dtype, choices=("float64", "float32"))
     if name != "run":
         which = "every one" if name == "compare" else "the estimator; each in turn"
         arg(p, "--methods", method_names, None, f"a,b,c: the methods (default {which})")

@@ -206,9 +206,10 @@ def main(argv=None) -> int:
     apply_xla_cpu_workarounds()  # the command line's own choice; `import visjax` sets nothing
     import jax
 
-    jax.config.update("jax_enable_x64", True)  # float64 on the command line, set here once
     parser = build_parser()
     args = parser.parse_args(argv)
+    # float64 on the command line unless a study asks for float32 (--dtype), set here once
+    jax.config.update("jax_enable_x64", getattr(args, "dtype", "float64") == "float64")
 
     failed = None
     try:

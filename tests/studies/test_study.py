@@ -180,3 +180,23 @@ def test_a_runs_outcome_names_why_it_is_not_a_success():
     assert failed.outcome(dropped)[0] == "diverged"  # the run's own failure first
     code, why = Verdict("estimator", "successful", -1, {}, True, judged).outcome()
     assert code == "worse_than_trivial" and "12 times that of zero velocity" in why
+
+
+def test_available_memory_is_the_accelerators_own_on_a_gpu():
+    """Issue 47: a chunk on a GPU lives in the GPU's memory: `max_memory="available"` reads
+    the device's `memory_stats()` there, the host's memory on a CPU."""
+    from visjax.studies._sweep import available_memory
+
+    class FakeGPU:
+        platform = "gpu"
+
+        def memory_stats(self):
+            return {"bytes_limit": 80 * 2**30, "bytes_in_use": 30 * 2**30}
+
+    class Silent(FakeGPU):
+        def memory_stats(self):
+            return None
+
+    assert available_memory(FakeGPU()) == pytest.approx(0.8 * 50 * 2**30)
+    host = available_memory(Silent())  # no statistics: the host's, as on a CPU
+    assert host == pytest.approx(available_memory(jax.devices("cpu")[0]), rel=0.2)

@@ -27,6 +27,22 @@ COMMON = {
     "kind": ("str", "the schema of this summary (a key of `visjax.io.SUMMARIES`)"),
     "visjax_version": ("str", "the visjax version that wrote it"),
     "jax_version": ("str", "the JAX version"),
+    "backend?": (
+        "str",
+        "JAX's default backend that computed it (`cpu`, `gpu`, `tpu`); absent only from "
+        "summaries of earlier versions",
+    ),
+    "device?": (
+        "str",
+        "the first device of that backend (`cpu`, `NVIDIA H200`, ...); absent only from "
+        "summaries of earlier versions",
+    ),
+    "dtype?": (
+        "str",
+        "the floating-point type it computed in: `float64` (`jax_enable_x64`, the command "
+        "line's default) or `float32` (`--dtype float32`); absent only from summaries of "
+        "earlier versions",
+    ),
     "created_utc": ("str", "when it was written, ISO 8601, UTC"),
     "wall_time_s": ("float", "the command's wall time, s (compilation included)"),
     "seed": ("int|null", "the first noise seed (`null` where nothing is random)"),

@@ -114,6 +114,12 @@ def as_default(x) -> float | tuple:
     return float(x) if x.ndim == 0 else tuple(as_default(v) for v in x)
 
 
+def _canonical(dtype):
+    """`dtype` as JAX computes it now: float64 is float32 with `jax_enable_x64` off (a
+    float32 study), without the warning an explicit float64 request gives there."""
+    return jax.dtypes.canonicalize_dtype(dtype)
+
+
 class AbstractProblem(eqx.Module):
     """What a researcher means by "estimate X from Y", as one Module (no closures: a rebuilt
     problem with equal fields reuses the compiled studies of the first).
@@ -284,10 +290,10 @@ class AbstractProblem(eqx.Module):
         for name, spec in specs.items():
             value = spec.value
             if name in params:
-                given = jnp.asarray(params[name], dtype=value.dtype)
+                given = jnp.asarray(params[name], dtype=_canonical(value.dtype))
                 out[name] = jnp.broadcast_to(given, value.shape)
             elif name in self.data_parameters:  # the problem's own (traced) value
-                own = jnp.asarray(getattr(self, name), dtype=value.dtype)
+                own = jnp.asarray(getattr(self, name), dtype=_canonical(value.dtype))
                 out[name] = jnp.broadcast_to(own, value.shape)
             else:
                 out[name] = jnp.asarray(value)

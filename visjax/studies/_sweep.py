@@ -466,10 +466,22 @@ class _ChunkTask:
         return jax.tree_util.tree_map(np.asarray, out)
 
 
-def available_memory() -> float | None:
-    """Bytes of memory this process may still take: 80% of the memory available now
-    (`MemAvailable` of /proc/meminfo, else the free pages), as `sweep`'s `max_memory="available"`
-    and the command line's study checks take it; `None` where the system does not say."""
+def available_memory(device=None) -> float | None:
+    """Bytes a chunk may still take: 80% of the memory available now on `device` (default
+    JAX's first device), as `sweep`'s `max_memory="available"` and the command line's
+    study checks take it; `None` where neither the device nor the system says.
+
+    On an accelerator (a GPU: its programs' buffers live in its own memory) this is the
+    device's `memory_stats()`, `bytes_limit - bytes_in_use`; on a CPU the host's
+    (`MemAvailable` of /proc/meminfo, else the free pages)."""
+    device = device if device is not None else jax.devices()[0]
+    if getattr(device, "platform", "cpu") != "cpu":
+        try:
+            stats = device.memory_stats() or {}
+        except Exception:  # a backend without memory statistics
+            stats = {}
+        if "bytes_limit" in stats:
+            return 0.8 * float(stats["bytes_limit"] - stats.get("bytes_in_use", 0))
     try:
         with open("/proc/meminfo") as f:
             for line in f:
