@@ -37,6 +37,8 @@ import sys
 HERE = pathlib.Path(__file__).parent
 PERFORMANCE_PAGE = HERE.parent / "docs" / "performance.md"
 START, END = "<!-- performance-table:start -->", "<!-- performance-table:end -->"
+GPU_PAGE = HERE.parent / "docs" / "gpu.md"
+F32_START, F32_END = "<!-- float32-table:start -->", "<!-- float32-table:end -->"
 
 # name: (script, full arguments, quick arguments)
 BENCHMARKS = {
@@ -54,6 +56,12 @@ BENCHMARKS = {
         ["--duration", "1", "--batch", "8"],
     ),
     "compile_times": ("compile_times.py", [], []),
+    "float32_accuracy": ("float32_accuracy.py", [], ["--seeds", "2", "--duration", "0.2"]),
+    "sweep": (
+        "sweep.py",
+        ["--batches", "1", "1024", "16384", "--chunk", "16384", "--repeats", "2"],
+        ["--batches", "1", "8", "--duration", "0.1", "--repeats", "1", "--chunk", "8"],
+    ),
     "gain_sweep": ("gain_sweep.py", [], ["--batches", "1", "64", "--duration", "0.2"]),
     "sweep_scaling": (
         "sweep_scaling.py",
@@ -137,6 +145,7 @@ def run_one(name, quick):
         return {"error": out.stderr.strip().splitlines()[-20:], "command": cmd[1:]}
     result = json.loads(out.stdout)
     result["command"] = " ".join(["python", f"benchmarks/{script}", *cmd[2:]])
+    result["date"] = datetime.date.today().isoformat()  # each figure's own
     return result
 
 
@@ -293,6 +302,23 @@ def table(results: dict) -> str:
                 _met(row["ns_per_trajectory_step"] <= 10) if row["batch"] == 1024 else "-",
             )
         )
+    sw = r.get("sweep", {})
+    for row in sw.get("results", []):
+        if "sweep_over_raw" not in row or row["batch"] < 1024:
+            continue
+        rows.append(
+            (
+                f"`studies.sweep` of the velocity problem, batch {row['batch']:,} x"
+                f" {row['steps_per_trajectory']:,} steps ({row['dtype']}, noise and"
+                " reconstruction per trajectory)",
+                f"{_fmt(row['ns_per_trajectory_step'])} ns per trajectory-step",
+                f"the same study written on the builders (`monte_carlo.raw_study`)"
+                f" {_fmt(row['raw_ns_per_trajectory_step'])} ns",
+                f"{_fmt(row['sweep_over_raw'])}x the raw study",
+                "<= 1.3x at batch 131,072",
+                _met(row["sweep_over_raw"] <= 1.3) if row["batch"] >= 131072 else "-",
+            )
+        )
     vg = r.get("vs_gtsam", {})
     if "batch_speedup_vs_gtsam_loop" in vg:
         b = vg["batch"]
@@ -364,14 +390,33 @@ def tables(results: dict) -> str:
     return "\n".join(parts).rstrip()
 
 
-def write_table(results: dict, page: pathlib.Path = PERFORMANCE_PAGE) -> None:
-    """Replace the table between the markers of `page` with `tables(results)`."""
+def float32_tables(results: dict) -> str:
+    """docs/gpu.md's float32 tables: `float32_accuracy.py`'s, each device's that has one."""
+    from float32_accuracy import markdown
+
+    parts = []
+    for name, record in (results.get("devices") or {}).items():
+        f = record.get("benchmarks", {}).get("float32_accuracy", {})
+        if "rows" in f:
+            parts += [f"Measured on {name} ({f['seeds']} keys, {f['duration_s']} s scenes,"
+                      f" {record['date']}):", "", markdown(f["rows"])]  # fmt: skip
+    return "\n".join(parts).rstrip() or "(not measured)"
+
+
+def _replace_between(page: pathlib.Path, start: str, end: str, body: str) -> None:
     text = page.read_text()
-    if START not in text or END not in text:
-        raise SystemExit(f"{page} has no {START} ... {END} markers.")
-    head, rest = text.split(START, 1)
-    _, tail = rest.split(END, 1)
-    page.write_text(f"{head}{START}\n{tables(results)}\n{END}{tail}")
+    if start not in text or end not in text:
+        raise SystemExit(f"{page} has no {start} ... {end} markers.")
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    page.write_text(f"{head}{start}\n{body}\n{end}{tail}")
+
+
+def write_table(results: dict, page: pathlib.Path = PERFORMANCE_PAGE) -> None:
+    """Replace the tables between the markers of `page` with `tables(results)`, and those
+    of docs/gpu.md with `float32_tables(results)`."""
+    _replace_between(page, START, END, tables(results))
+    _replace_between(GPU_PAGE, F32_START, F32_END, float32_tables(results))
 
 
 def main():

@@ -8,6 +8,7 @@ import pathlib
 import subprocess
 import sys
 
+import jax
 import pytest
 
 BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
@@ -62,6 +63,8 @@ def test_results_file_keeps_each_devices_figures_with_its_ratios():
         assert run_all.checked_ratios(record["benchmarks"])  # something --check can compare
     page = (BENCH.parent / "docs" / "performance.md").read_text()
     assert run_all.tables(results) in page  # the page's tables are generated from the file
+    gpu = (BENCH.parent / "docs" / "gpu.md").read_text()
+    assert run_all.float32_tables(results) in gpu
 
 
 def test_device_fields_name_the_device_and_the_dtype():
@@ -91,6 +94,7 @@ def test_benchmark_json_records_device_and_dtype(script, args, dtype):
     assert out.returncode == 0, out.stderr[-3000:]
     result = json.loads(out.stdout)
     assert result["dtype"] == dtype
-    assert result["device"] == _device.device_name() and result["platform"] == "cpu"
+    assert result["device"] == _device.device_name()  # the tests' own device, any backend
+    assert result["platform"] == jax.devices()[0].platform
     for row in result.get("results", []):  # sweep.py: per batch, and its runner overhead
         assert row["dtype"] == dtype and row["sweep_over_raw"] > 0

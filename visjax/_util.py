@@ -94,6 +94,21 @@ def chunked_map(f, xs, batch_size: int):
     return jax.tree_util.tree_map(assemble, ys)
 
 
+def solver_tolerance(tol: float, dtype) -> float:
+    """A nonlinear solver's convergence tolerance `tol`, at least 1000 eps of `dtype`.
+
+    An iterative solver stops when successive iterates differ by less than
+    `atol + rtol |y|`; near the solution they still differ by the rounding of a step, the
+    residuals' rounding (a pixel of ~300 carries 2e-5 px in float32) carried through the
+    problem's conditioning. 1e-9, chosen for float64 (eps 2.2e-16), is below float32's
+    eps (1.2e-7): a float32 solve then never converges and reports
+    `nonlinear_max_steps_reached` (measured: every run of the velocity problem's batch
+    fits and EKF, whose frame poses are such solves). 1000 eps (1.2e-4 in float32) is met
+    on every frame of the section-6 scene (100 eps left some frames unconverged) and
+    leaves float64's 1e-9 as it is."""
+    return max(float(tol), 1000.0 * float(jnp.finfo(dtype).eps))
+
+
 def covariance(residuals, y, args, count) -> tuple:
     """The covariance of the estimate `y` (a pytree) of `residuals(y, args)` (any shape;
     the rows of unseen data zero), `count` the number of residual components that carry

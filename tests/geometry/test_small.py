@@ -127,3 +127,17 @@ def test_spd_solve_matches_numpy_under_vmap_and_its_gradient_a_finite_difference
     h = 1e-6
     fd = (f(G[0] + h * D) - f(G[0] - h * D)) / (2 * h)
     np.testing.assert_allclose(np.sum(g * D), fd, rtol=1e-5)
+
+
+def test_barrier_is_the_cpus_only(monkeypatch):
+    """The per-frame barriers materialise shared quantities for XLA's CPU compiler (no
+    multi-output fusion there); elsewhere they would only cut the fusions (issue 47)."""
+    from visjax._small import barrier
+
+    def prims(f):
+        return {e.primitive.name for e in jax.make_jaxpr(f)(jnp.ones(3)).jaxpr.eqns}
+
+    assert "optimization_barrier" in prims(lambda x: barrier(x * 2.0))
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert "optimization_barrier" not in prims(lambda x: barrier(x * 2.0))
+    assert float(barrier(jnp.asarray(2.0))) == 2.0

@@ -30,7 +30,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, all_finite, raise_or_keep
 from .._small import spd_solve
-from .._util import as_float, check_shape
+from .._util import as_float, check_shape, solver_tolerance
 from ..estimators import FixedCamera, Solution, VelocityOutput
 from ..geometry import euclidean_reconstruction, so3_exp, so3_log
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
@@ -124,7 +124,8 @@ def frame_poses(
     loss = as_loss(loss)
     s, x_f_star = object_features(camera)
     d_star = z1_star * (n_star @ jnp.linalg.solve(A, jnp.append(p_ref[0], 1.0)))
-    solver = optx.GaussNewton(rtol=1e-9, atol=1e-9)
+    tol = solver_tolerance(1e-9, A.dtype)  # float64: 1e-9; float32: 1000 eps
+    solver = optx.GaussNewton(rtol=tol, atol=tol)
 
     def one(p):
         # NaN: a feature not seen; inf: a bad measurement (the frame's result says so)

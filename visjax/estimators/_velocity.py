@@ -23,6 +23,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._results import RESULTS, raise_or_keep
 from .._small import (
+    barrier,
     det3,
     from_rows,
     mm,
@@ -270,7 +271,7 @@ def velocity_measurements(
     result = RESULTS.where(z1_ok, result, RESULTS.invalid_intrinsics)
     result = RESULTS.where(camera.result == RESULTS.successful, result, camera.result)
     # once per frame (a barrier: XLA would recompute it into each of the 90 entries below)
-    bad = jax.lax.optimization_barrier(result != RESULTS.successful)
+    bad = barrier(result != RESULTS.successful)
     J, J_inv = (from_rows(M, A.dtype) for M in (J, J_inv))
     e, J, J_inv, R = (jnp.where(bad, jnp.nan, x) for x in (e, J, J_inv, R))
     out = VelocityMeasurement(e=e, J=J, J_inv=J_inv, R=R, result=result)

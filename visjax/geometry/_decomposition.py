@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from .._small import det2, det3, eigh3, inv2, inv3, mm, mv, norm, sall, smax
+from .._small import barrier, det2, det3, eigh3, inv2, inv3, mm, mv, norm, sall, smax
 from .._util import as_float, check_shape
 
 
@@ -193,7 +193,7 @@ def _known_normal_unscaled(H, n):
         + jnp.cross(qa, qb)[:, None] * n[None, :]
     )
     x_h = mv(H / scale - R, n)  # H n = R n + x_h (n . n), eq. (12)
-    return jax.lax.optimization_barrier((R, x_h, scale))  # once per frame, as in `_dlt`
+    return barrier((R, x_h, scale))  # once per frame, as in `_dlt`
 
 
 def decompose_homography_known_normal(

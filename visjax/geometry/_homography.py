@@ -19,6 +19,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, intrinsics_ok, raise_or_keep
 from .._small import (
+    barrier,
     det3,
     inv3,
     mm,
@@ -157,7 +158,7 @@ def _four_point(p_ref, p_cur, w, ref_bad, cur_bad, tol):
     # on its own, so that a reference shared by a batch stays unbatched. The barrier: the
     # predicate once per frame (XLA would recompute the areas into every entry it selects).
     ref_swap = (_min_triangle_area(ref[3], ref[4]) < tol) | ref_bad
-    cur_swap = jax.lax.optimization_barrier((_min_triangle_area(cur[3], cur[4]) < tol) | cur_bad)
+    cur_swap = barrier((_min_triangle_area(cur[3], cur[4]) < tol) | cur_bad)
 
     def safe(x, y, swap):
         return (
@@ -196,9 +197,7 @@ def _dlt(p_ref, p_cur, visible=None):
     ref_bad = ~sall(jnp.isfinite(p_ref))
     cur_bad = ~sall(jnp.isfinite(p_cur))
     p_ref = jnp.where(ref_bad, jnp.zeros_like(p_ref), p_ref)
-    p_cur, cur_bad = jax.lax.optimization_barrier(
-        (jnp.where(cur_bad, jnp.zeros_like(p_cur), p_cur), cur_bad)
-    )
+    p_cur, cur_bad = barrier((jnp.where(cur_bad, jnp.zeros_like(p_cur), p_cur), cur_bad))
     nonfinite = ref_bad | cur_bad
     tol = _rcond_tol(dtype)
     if n == 4:
@@ -235,7 +234,7 @@ def _dlt(p_ref, p_cur, visible=None):
             (c_cur[0], c_cur[1], s_cur),
         )
 
-    bad = jax.lax.optimization_barrier(degenerate | nonfinite | ~n_visible_ok)  # once per frame
+    bad = barrier(degenerate | nonfinite | ~n_visible_ok)  # once per frame
     G = [[jnp.where(bad, float(i == j), G[i][j]) for j in range(3)] for i in range(3)]
     g33 = G[2][2]
     # g33 = 0: the image origin maps to infinity. Compared with the other terms of the
@@ -261,7 +260,7 @@ def _dlt(p_ref, p_cur, visible=None):
     )
     # materialised once per frame: XLA's CPU fusions would otherwise recompute the whole
     # fit into every entry of every consumer
-    return jax.lax.optimization_barrier(G_n), result
+    return barrier(G_n), result
 
 
 def _check_pair(p_ref, p_cur):

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS
-from .._small import det3, dot, from_rows, mm, rows, sall, smax, smm, sskew, ssum
+from .._small import barrier, det3, dot, from_rows, mm, rows, sall, smax, smm, sskew, ssum
 from .._util import as_float, check_shape
 
 
@@ -232,7 +232,7 @@ def _so3_log_checked(R):
     # a non-finite entry never becomes a finite vector (the clip and argmax above would
     # hide it): NaN in, NaN out
     finite = sall(jnp.isfinite(R))
-    out = jax.lax.optimization_barrier(jnp.where(finite, out, jnp.nan))  # once per frame
+    out = barrier(jnp.where(finite, out, jnp.nan))  # once per frame
     # not a rotation: R^T R = I and det R = 1 within a dtype-aware tolerance, 10 sqrt(eps)
     # (1.5e-7 in float64, 3.5e-3 in float32; the reconstruction's rotations meet it to
     # ~1e-15 and ~1e-6)
