@@ -118,3 +118,26 @@ def test_names_and_folders_are_one_each(empty_registry):
         studies.register_reproduction("c", None, title="C")
     studies.register_reproduction("a", run, title="A, replaced", replace=True)
     assert studies.registered_reproduction("a").title == "A, replaced"
+
+
+def test_quick_reproductions_run_on_the_hosts_cpu_where_the_default_is_an_accelerator(
+    monkeypatch, empty_registry
+):
+    """Issue 47: `reproduce --quick`'s small runs compile more than they compute; on a GPU
+    they run on the host's CPU (`jax.default_device`), the full settings on the GPU."""
+    import jax
+
+    seen = []
+
+    def run(out=None, *, quick=False, quiet=False, formats=("png",)):
+        seen.append(jax.config.jax_default_device)
+        return [studies.reproduction_row("x: y", 1.0, 1.0, "truth", "m")]
+
+    studies.register_reproduction("where", run, title="Where")
+    entry = studies.registered_reproduction("where")
+    entry.rows(quick=True)
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    entry.rows(quick=True)
+    entry.rows(quick=False)
+    cpu = jax.devices("cpu")[0]
+    assert seen[0] is None and seen[1] == cpu and seen[2] is None
