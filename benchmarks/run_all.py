@@ -49,6 +49,11 @@ BENCHMARKS = {
         ["--batch", "1024"],
         ["--batch", "32", "--duration", "0.2", "--repeats", "1"],
     ),
+    "monte_carlo_float32": (
+        "monte_carlo.py",
+        ["--batch", "1024", "--dtype", "float32"],
+        ["--batch", "32", "--duration", "0.2", "--repeats", "1", "--dtype", "float32"],
+    ),
     "long_run_memory": ("long_run_memory.py", [], ["--steps", "50000"]),
     "gradient_uncalibrated": (
         "gradient_uncalibrated.py",
@@ -191,6 +196,21 @@ def table(results: dict) -> str:
                 f"{_fmt(m['speedup_vs_numpy_loop'])}x the NumPy loop",
                 "<= 300 ns at batch 1,024",
                 _met(ns <= 300 and m["batch"] >= 1024),
+            )
+        )
+    m32 = r.get("monte_carlo_float32", {})
+    if "ns_per_trajectory_step" in m32:
+        ns = m32["ns_per_trajectory_step"]
+        rows.append(
+            (
+                f"the same study in float32 (`--dtype float32`), batch {m32['batch']:,}",
+                f"{_fmt(ns)} ns per trajectory-step",
+                f"the measurement alone {_fmt(m32['measure_only_ns_per_frame'])} ns/frame"
+                f" ({m32['measure_kernels']} kernels, {_fmt(m32['measure_bytes_per_frame'])}"
+                " bytes per frame)",
+                f"{_fmt(m32['speedup_vs_numpy_loop'])}x the NumPy loop",
+                "(reported)",
+                "-",
             )
         )
     if "ns_per_trajectory_step_rbg" in m:
