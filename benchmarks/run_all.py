@@ -133,14 +133,6 @@ def check(recorded: dict, measured: dict, tolerance: float = TOLERANCE) -> list[
     return rows
 
 
-def device_record(results: dict, device: str) -> dict | None:
-    """This device's record of a results file (a file of the one-device layout is the
-    record of the device it names in `machine`)."""
-    if "devices" in results:
-        return results["devices"].get(device)
-    return results if "benchmarks" in results else None
-
-
 def run_one(name, quick):
     script, full, small = BENCHMARKS[name]
     cmd = [sys.executable, str(HERE / script), *(small if quick else full)]
@@ -485,7 +477,7 @@ def main():
     stored = json.loads(args.out.read_text()) if args.out.exists() else {}
     devices = dict(stored.get("devices", {}))
     if "benchmarks" in stored:  # the one-device layout of earlier files: its CPU record
-        devices.setdefault(_legacy_device(stored), {k: v for k, v in stored.items()})
+        devices.setdefault(_legacy_device(stored), dict(stored))
     mine = devices.get(device)
     if args.check:
         if mine is None:
