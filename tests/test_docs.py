@@ -9,10 +9,14 @@ import re
 import subprocess
 import sys
 import time
+import tomllib
 import types
 from pathlib import Path
 
 import pytest
+import yaml
+
+from visjax import __version__
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -156,3 +160,34 @@ def test_pages_name_the_papers_not_their_files():
         text = page.read_text()
         found = re.findall(r"seed[ -]?00[034]|00[034]_[0-9a-f]{16}", text, flags=re.I)
         assert not found, f"{page.relative_to(DOCS)}: {found}"
+
+
+def test_changelog_citation_and_license_agree_with_the_package():
+    """CHANGELOG.md's newest version is the package's, versions newest first; CITATION.cff
+    parses as YAML with the fields CFF 1.2 requires, the package's version and the five
+    papers visjax implements; LICENSE is the Apache-2.0 text pyproject.toml declares."""
+    versions = re.findall(
+        r"^## (\d+\.\d+\.\d+) \(\d{4}-\d\d-\d\d\)$", (ROOT / "CHANGELOG.md").read_text(), re.M
+    )
+    assert versions and versions[0] == __version__
+    as_tuples = [tuple(map(int, v.split("."))) for v in versions]
+    assert as_tuples == sorted(as_tuples, reverse=True) and len(set(versions)) == len(versions)
+
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text())
+    assert {"cff-version", "message", "title", "authors"} <= set(cff)
+    assert str(cff["version"]) == __version__
+    titles = " | ".join(ref["title"] for ref in cff["references"]).lower()
+    for words in (
+        "moving object's velocity",
+        "unknown input observer",
+        "uncalibrated camera",
+        "active structure from motion",
+        "special linear group",
+    ):
+        assert words in titles, words
+    assert all(ref["authors"] for ref in cff["references"])
+
+    license_text = (ROOT / "LICENSE").read_text()
+    assert "Apache License" in license_text and "Version 2.0, January 2004" in license_text
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert project["license"]["text"] == cff["license"] == "Apache-2.0"
