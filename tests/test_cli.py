@@ -1,4 +1,5 @@
 import json
+import shlex
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -8,6 +9,7 @@ import pytest
 
 import visjax
 from tests.helpers import check_outputs, check_testbed_tracking, twin_kinematics_residual
+from visjax import _options
 from visjax.cli import build_parser, main
 from visjax.io import read_summary
 from visjax.papers.chitrakaran import K_EQ63
@@ -126,6 +128,11 @@ def test_bad_options_give_one_line_and_exit_2(argv, capsys, tmp_path):
         main(argv + ["--out", str(out)])
     assert e.value.code == 2
     err = capsys.readouterr().err
+    if argv[1:2] == ["structure"]:  # the old name is one warning line first
+        note, err = err.split("\n", 1)
+        assert (
+            note == "warning: the problem name 'structure' is deprecated: it is now 'moving_point'"
+        )
     assert err.startswith("visjax: error:") and err.count("\n") == 1, err
     assert "Traceback" not in err
     assert not out.exists()
@@ -273,6 +280,25 @@ def test_one_option_vocabulary_and_version(capsys):
     assert "seed 0" not in parser.format_help()
 
 
+def test_every_help_ends_with_examples_that_parse():
+    """Each command's `--help` ends with two or three examples (`visjax --help` with
+    three), and each example parses with the command line's own parser and checks."""
+    parser = build_parser()
+    commands = parser._subparsers._group_actions[0]
+    names = {name for name, p in commands.choices.items() if commands.choices[name] is p}
+    aliases = {"structure", "euclidean"}
+    assert set(_options.EXAMPLES) == {None} | (names - aliases)
+    for name, lines in _options.EXAMPLES.items():
+        assert 2 <= len(lines) <= 3, name
+        sub = parser if name is None else commands.choices[name]
+        assert sub.format_help().rstrip().endswith(lines[-1]), name
+        for line in lines:
+            argv = shlex.split(line)
+            assert argv[0] == "visjax" and (name is None or argv[1] == name), line
+            args = parser.parse_args(argv[1:])
+            assert args.command == argv[1], line
+
+
 def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch):
     """A folder without write permission. As root every folder is writable, so the
     permission check is made to read the mode bits, as it would for any other user."""
@@ -385,7 +411,10 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
     data.save(tmp_path / "v2.npz")
     capsys.readouterr()
     assert main(["velocity", "--data", str(tmp_path / "v2.npz"), "--quiet"]) == 0
-    assert "rms" not in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "rms" not in out and out.endswith(
+        "nothing written (no --out DIR: the summary, tables and figures were not kept)\n"
+    )
     bad = dict(np.load(path))
     del bad["A"]
     np.savez(tmp_path / "bad.npz", **bad)

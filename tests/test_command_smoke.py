@@ -30,9 +30,12 @@ def test_compare_smoke(tmp_path, capsys):
     assert set(records["method"]) == {"estimator", "batch", "batch_window", "ekf"}
     assert (records["result"] == "successful").all()
     assert (records["latency_s_per_sample"] > 0).all()
-    rms = np.array(records["rms"].tolist())
+    rms = records[["rms_X", "rms_Y", "rms_Z"]].to_numpy()  # tidy: a column per axis
     assert rms.shape == (4, 3) and np.all(np.isfinite(rms)) and np.all(rms > 0)
-    assert len(pd.read_csv(out / "records.csv")) == 4
+    named = set(records.columns) - {"method", "result"}  # no list-valued column
+    assert all(pd.api.types.is_numeric_dtype(records[c]) for c in named)
+    csv = pd.read_csv(out / "records.csv")
+    assert len(csv) == 4 and np.allclose(csv[["rms_X", "rms_Y", "rms_Z"]], rms, rtol=1e-15)
     assert (out / "comparison.png").stat().st_size > 0
     assert "batch_window" in capsys.readouterr().out
 
@@ -88,6 +91,11 @@ def test_run_smoke(tmp_path, capsys):
     ev = studies.evaluate(problem, keys=jax.random.key(3)[None])
     np.testing.assert_allclose(summary["metrics"]["rms"], ev.metrics["rms"][0], rtol=1e-12)
     table = pd.read_parquet(out / "estimates.parquet")
-    assert table.columns[0] == "t" and {"position[0]", "position[2]"} <= set(table.columns)
+    assert table.columns[0] == "t" and {"X", "Z", "X_true", "Z_true", "x3_hat"} <= set(table)
+    # the truth beside the estimate: the run's own rms over the second half, from the table
+    half = table[table["t"] >= table["t"].iloc[-1] / 2]
+    to_m = problem.to_m
+    rms_z = np.sqrt(np.mean((half["Z"] - half["Z_true"]) ** 2)) * to_m
+    assert rms_z == pytest.approx(summary["metrics"]["rms"][2], rel=0.05)
     assert np.all(np.diff(table["t"]) > 0) and (out / "run.png").stat().st_size > 0
     assert "rms_worst" in capsys.readouterr().out

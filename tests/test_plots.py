@@ -122,9 +122,8 @@ def _records(methods=("observer", "batch", "ekf")):
 
 def _comparison(seeds=None, **kw):
     if seeds is None:
-        return plots.plot_comparison(
-            _records(), lambda r: r["err"], label="final position error (m)", **kw
-        )
+        kw.setdefault("label", "final position error (m)")
+        return plots.plot_comparison(_records(), lambda r: r["err"], **kw)
     t, truth, _ = _trajectory(d=3)
     errors = {m: _trajectory(d=3, seeds=seeds, seed=i)[2] - truth for i, m in enumerate("ab")}
     return plots.plot_comparison(
@@ -158,14 +157,13 @@ def _sweep(**kw):
         ["K", "rho"],
         best={"params": {"K": 1.0, "rho": 2.0}, "metric": 2e-3},
         paper={"params": {"K": 1.0, "rho": 1.0}, "metric": 5e-3},
-        label="worst-axis RMS (m)",
-        **kw,
+        **{"label": "worst-axis RMS (m)", **kw},
     )
 
 
 def _tune(**kw):
     history = [{"step": i, "loss": 1.0 / (i + 1)} for i in range(10)]
-    return plots.plot_tune_history(history, label="training RMS (m)", **kw)
+    return plots.plot_tune_history(history, **{"label": "training RMS (m)", **kw})
 
 
 def _transient(**kw):
@@ -178,7 +176,7 @@ def _transient(**kw):
 def _noise_study(**kw):
     by = [studies.Comparison(_records()).statistics("err", resamples=200, seed=i) for i in range(3)]
     stats = {"metric": "err", "noise_levels": [0.1, 0.5, 1.0], "by_noise": by}
-    return plots.plot_noise_study(stats, label="final position error (m)", **kw)
+    return plots.plot_noise_study(stats, **{"label": "final position error (m)", **kw})
 
 
 FIGURES = {
@@ -278,6 +276,48 @@ def _x_label_with_unit(ax):
     return labels[0] if labels else ""
 
 
+def outside_canvas(fig, renderer=None) -> list[str]:
+    """What of a figure reaches outside its canvas (one pixel of tolerance), which a
+    saved file would clip: the drawn artists' tight box (ticks beyond the view limits are
+    not drawn), per axes (named by its labels), figure legend and figure text."""
+    renderer = renderer or FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    box = fig.bbox
+
+    def out(e):
+        return e.x0 < box.x0 - 1 or e.y0 < box.y0 - 1 or e.x1 > box.x1 + 1 or e.y1 > box.y1 + 1
+
+    found = [
+        f"axes {ax.get_ylabel() or ax.get_title()!r}"
+        for ax in fig.axes
+        if ax.get_visible() and out(ax.get_tightbbox(renderer))
+    ]
+    found += [f"legend {lg.get_texts()[0].get_text()!r}..." for lg in fig.legends
+              if out(lg.get_window_extent(renderer))]  # fmt: skip
+    texts = [t for t in fig.texts if t.get_visible() and t.get_text()]
+    found += [f"text {t.get_text()!r}" for t in texts if out(t.get_window_extent(renderer))]
+    return found
+
+
+# the longest of the registered problems' headline labels: the commands' figures carry these
+LABELS = [
+    "worst-axis RMS over the window (m/s, rad/s)",
+    "RMS of |H_hat H^-1 - I| over the second half (-)",
+]
+
+
+@pytest.mark.parametrize("label", LABELS)
+@pytest.mark.parametrize("name", ["sweep", "tune_history", "comparison", "noise_study"])
+def test_the_commands_figures_keep_every_label_on_the_canvas(name, label):
+    """The study commands' figures with each problem's own metric label (the longest
+    labels a figure carries): no label, tick or legend entry is clipped by the canvas."""
+    fig = FIGURES[name](label=label, title=f"a problem's title, {label}")
+    try:
+        assert not outside_canvas(fig), outside_canvas(fig)
+    finally:
+        plt.close(fig)
+
+
 def _check_paper_figure(fig, name):
     """The width of a paper column; 8-9 pt text; every axes with data labelled with units
     (x: its own label or that of the panel sharing its time axis; categorical axes exempt);
@@ -295,6 +335,7 @@ def _check_paper_figure(fig, name):
         if text.get_text() and text.get_visible():
             assert 8 <= text.get_fontsize() <= 9, (name, text.get_text())
     renderer = FigureCanvasAgg(fig).get_renderer()  # a closed figure's canvas has none
+    assert not outside_canvas(fig, renderer), (name, outside_canvas(fig, renderer))
     legends = list(fig.legends) + [ax.get_legend() for ax in fig.axes if ax.get_legend()]
     for legend in legends:
         box = legend.get_window_extent(renderer)
@@ -482,3 +523,48 @@ def test_the_style_keeps_interactive_mode_set_inside_it():
         assert matplotlib.rcParams["font.size"] == before[1]
     finally:
         matplotlib.rcParams["interactive"] = before[0]
+
+
+def test_moving_point_error_shows_the_transient_and_the_steady_state():
+    """An error that starts 100 times its steady state: the error axis is linear over the
+    second half's range (shaded) and logarithmic beyond, and its limits hold the whole
+    transient; without a transient the axis stays linear."""
+    t = np.linspace(0.0, 2.0, N)
+    truth = np.stack([np.sin(t), np.cos(t), 2.0 + 0 * t], axis=-1)
+    wobble = 1e-3 * np.sin(40 * t)[:, None]
+    for transient, scale in ((0.5 * np.exp(-10 * t)[:, None], "symlog"), (0.0, "linear")):
+        fig = plots.plot_moving_point(t, truth, truth + wobble + transient)
+        try:
+            errors = [ax for ax in fig.axes if ax.get_ylabel().startswith("error")]
+            assert len(errors) == 3 and all(ax.get_yscale() == scale for ax in errors)
+            if scale == "symlog":
+                low, high = errors[0].get_ylim()
+                assert high >= 500.0 * 0.99  # mm: the largest transient error is inside
+                assert errors[0].yaxis.get_transform().linthresh >= 4.0 * 0.99  # 4x 1 mm
+        finally:
+            plt.close(fig)
+
+
+def test_weak_parallax_shades_where_the_depth_is_not_observable():
+    """`jang.weak_parallax`: the camera's v_cy crossing zero with the unknown input in x
+    (set II.3's D) is a weakly observable stretch around the crossing, and only there; a
+    static point keeps v_cx's parallax. `plot_moving_point(weak=...)` shades it in every
+    panel, with one legend entry."""
+    from visjax.papers.jang import weak_parallax
+
+    t = np.linspace(0.0, 20.0, 2001)
+    position = np.c_[0.1 + 0 * t, 0.05 + 0 * t, 1.0 + 0 * t]
+    velocity = np.zeros((t.size, 6))
+    velocity[:, 0], velocity[:, 1] = 0.3, 0.4 * np.cos(2 * np.pi * t / 20.0)  # zero at 5, 15
+    weak = weak_parallax(position, velocity, D=[1.0, 0.0, 0.0])
+    edges = t[np.flatnonzero(np.diff(np.r_[0, weak.astype(int), 0]))]
+    assert len(edges) == 4 and np.all(np.abs(edges - [5, 5, 15, 15]) < 0.4), edges
+    assert not weak_parallax(position, velocity).any()  # static point: v_cx's parallax
+    fig = plots.plot_moving_point(t, position, position + 1e-3, weak=weak)
+    try:
+        spans = [p for ax in fig.axes for p in ax.patches if p.get_label() != "_nolegend_"]
+        assert len([p for p in fig.axes[0].patches]) == 2  # two stretches per panel
+        labels = [t.get_text() for t in fig.legends[0].get_texts()]
+        assert labels.count("depth weakly observable") == 1, (labels, len(spans))
+    finally:
+        plt.close(fig)

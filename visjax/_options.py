@@ -6,8 +6,11 @@ grid, figure formats, are called, not copied), and the options commands share.""
 import argparse
 import math
 
+from . import io, report
+from ._util import did_you_mean
+from ._version import __version__
 from .plots import figure_formats
-from .studies import check_grid_text, parse_shard, problem_names, registered
+from .studies import BUDGET, check_grid_text, parse_shard, problem_names, registered
 
 MAX_SEED = 2**31 - 1
 """The largest seed every JAX mode (int32 without x64) holds exactly."""
@@ -72,7 +75,10 @@ def set_name(text: str) -> str:
     """A set of Jang's thesis: a variant of the registered `moving_point` problem."""
     sets = registered("moving_point").variants
     if text not in sets:
-        raise argparse.ArgumentTypeError(f"unknown set {text!r}; choose from {', '.join(sets)}")
+        hint = did_you_mean(text, sets)
+        raise argparse.ArgumentTypeError(
+            f"unknown set {text!r}{hint}; choose from {', '.join(sets)}"
+        )
     return text
 
 
@@ -93,6 +99,13 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"visjax: error: {message}\n")
+
+    def _check_value(self, action, value):  # argparse's, with the closest choice named
+        if action.choices is not None and value not in action.choices:
+            hint, among = did_you_mean(value, action.choices), ", ".join(map(repr, action.choices))
+            raise argparse.ArgumentError(
+                action, f"invalid choice: {value!r}{hint} (choose from {among})"
+            )
 
 
 def arg(p, flag, kind=None, default=None, help=None, **kw):
@@ -169,4 +182,189 @@ def verb(sub, name, help, *, seeds, noise, grid):
         arg(p, "--chunk", count, 64, "runs per vmap call (default 64)")
         slices = "alone: each chunk over every JAX device; i/N: the i-th of N slices (sweep)"
         arg(p, "--shard", shard_spec, False, slices, nargs="?", const=True, metavar="i/N")
+    return p
+
+
+EXAMPLES = {
+    None: [
+        "visjax reproduce --quick --out results",
+        "visjax run velocity --noise 0.1 --out run",
+        "visjax compare point_depth --seeds 8 --out cmp",
+    ],
+    "geometry": [
+        "visjax geometry --scenes 100 --noise 0.5 --out geometry",
+        "visjax geometry --points 8 --format png,pdf --out geometry8",
+    ],
+    "velocity": [
+        "visjax velocity --out velocity",
+        "visjax velocity --seeds 16 --noise 0.1 --out velocity16",
+        "visjax velocity --data my_plate.npz --out mine",
+    ],
+    "moving_point": [
+        "visjax moving_point --set I.1 --set II.1 --out sets",
+        "visjax moving_point --data my_point.npz --out mine",
+    ],
+    "static_points": [
+        "visjax static_points --duration 20 --out static",
+        "visjax static_points --data my_scene.npz --out mine",
+    ],
+    "run": [
+        "visjax run velocity --noise 0.1 --out run",
+        "visjax run moving_point --set II.1 --method ekf --out ekf",
+        "visjax run velocity --data my_plate.npz --out mine",
+    ],
+    "compare": [
+        "visjax compare velocity --seeds 8 --noise 0.1 --out cmp",
+        "visjax compare point_depth --noise 0,0.5,1 --out noise",
+        "visjax compare static_points --tune --budget 16 --out tuned",
+    ],
+    "sweep": [
+        'visjax sweep velocity --grid "K_scale=0.01:10:8" --seeds 8 --out sweep',
+        'visjax sweep velocity --grid "K_scale=0.01:10:64" --shard 0/4 --out part0',
+        'visjax sweep velocity --grid "K_scale=0.01:10:8" --resume --out sweep',
+    ],
+    "merge": [
+        "visjax merge part0 part1 part2 part3 --out merged",
+        "visjax merge sweep --out merged --force",
+    ],
+    "tune": [
+        'visjax tune velocity --grid "K_scale=0.01:10:8" --steps 30 --out tuned',
+        "visjax tune static_points --learning-rate 0.05 --out tuned",
+    ],
+    "track": [
+        "visjax track plate.mp4 --out tracks.csv",
+        "visjax track plate.mp4 --planar --max-features 50 --out tracks.npz",
+    ],
+    "data": [
+        "visjax data velocity --tracks tracks.npz --camera camera.yaml --out plate.npz",
+        "visjax data moving_point --tracks tracks.csv --camera camera.json --out point.npz",
+    ],
+    "testbed": [
+        "visjax testbed --set I.1 --duration 10 --no-video --out twin",
+        "visjax testbed --out twin",
+    ],
+    "reproduce": [
+        "visjax reproduce --quick --out results",
+        "visjax reproduce --format png,pdf --out results",
+    ],
+}
+"""Each command's `--help` ends with these (`with_examples`; `None`: `visjax --help`)."""
+
+
+def with_examples(parser, sub) -> None:
+    """Each parser's help ends with its `EXAMPLES` (the text kept as written)."""
+    for name, p in [(None, parser), *sub.choices.items()]:
+        lines = EXAMPLES.get(name)
+        if lines:
+            p.epilog = "examples:\n" + "\n".join(f"  {line}" for line in lines)
+            p.formatter_class = argparse.RawDescriptionHelpFormatter
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command line's grammar: every command and option (`visjax.cli` runs them)."""
+
+    parser = Parser(prog="visjax", description="Vision-based estimators in JAX (docs/)")
+    parser.add_argument("--version", action="version", version=f"visjax {__version__}")
+    arg(parser, "--import", None, None, "a module registering problems or reproductions of yours",
+         dest="modules", action="append", metavar="MODULE")  # fmt: skip
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+
+    g = sub.add_parser("geometry", help="homography and decomposition vs OpenCV vs the truth")
+    arg(g, "--scenes", count, 100, "random planar scenes (default 100)")
+    arg(g, "--points", points, 4, "points per scene, >= 4 (default 4)")
+    common(g, "summary.json, scenes.parquet and the figure", 0.0, "the seed (default 0)")
+
+    v = sub.add_parser("velocity", help="Chitrakaran et al.'s section 6, or your data")
+    arg(v, "--duration", positive, 10.0, "seconds (default 10)")
+    arg(v, "--rate", positive, 1000.0, "sample rate, Hz (default 1000)")
+    arg(v, "--K", six, None, "diagonal of K (default: the problem's, eq. (63))")
+    arg(v, "--rho", six, None, "diagonal of rho (default: the problem's, eq. (63))")
+    arg(v, "--filter-hz", positive, None, "with --data: a causal 2nd-order low-pass")
+    common(v, OUT, 0.0, FIRST, SEEDS, OWN_DATA)
+    arg(v, "--max-hours", positive, 24.0, HOURS)
+
+    st = _problem_parser(sub, "moving_point", "structure", "Jang's unknown input observer")
+    arg(st, "--set", None, None, "I.1 ... II.3 (repeatable; default: all)", action="append")
+    arg(st, "--duration", positive, 30.0, "seconds per set (default 30)")
+    common(st, OUT, 0.1, FIRST, SEEDS, OWN_DATA)
+    arg(st, "--max-hours", positive, 24.0, HOURS)
+
+    eu = _problem_parser(sub, "static_points", "euclidean", "Nath et al.'s uncalibrated camera")
+    arg(eu, "--duration", positive, 30.0, "seconds (default 30)")
+    common(eu, OUT, 0.0, FIRST, SEEDS, OWN_DATA)
+    arg(eu, "--max-hours", positive, 24.0, HOURS)
+    arg(eu, "--noise-px", nonnegative, None, argparse.SUPPRESS, dest="noise")  # 0.2's name
+
+    run = verb(sub, "run", "one method of a problem once", seeds=None, noise=0.0, grid=False)
+    arg(run, "--method", None, None, "the method (default: the estimator)")
+    help = "a problem's methods on identical noisy inputs"
+    cmp = verb(sub, "compare", help, seeds=4, noise=None, grid=False)
+    hours = "refuse, after the first seed, a comparison estimated to take longer (default 24)"
+    arg(cmp, "--max-hours", positive, 24.0, hours)
+    tune = "first tune every method, with the same --budget, on as many other seeds"
+    arg(cmp, "--tune", help=tune, action="store_true")
+    budget = f"objective evaluations per method for --tune (default {BUDGET})"
+    arg(cmp, "--budget", count, BUDGET, budget)
+    help = "a grid of a problem's parameters over noise seeds"
+    sw = verb(sub, "sweep", help, seeds=8, noise=None, grid=True)
+    arg(sw, "--resume", help="continue an interrupted sweep from its parts", action="store_true")
+    ray = "run the chunks on a Ray cluster (no address: a local one; pip install visjax[ray])"
+    arg(sw, "--ray", None, None, ray, nargs="?", const="local", metavar="ADDRESS")
+    me = sub.add_parser("merge", help="the parts of a sweep's shards as one table")
+    me.add_argument("paths", nargs="+", metavar="DIR", help="folders holding the parts")
+    arg(me, "--out", None, None, "runs.parquet, runs.csv and summary.json", required=True)
+    arg(me, "--force", help=FORCE, action="store_true")
+    arg(me, "--quiet", help="less printing", action="store_true")
+    help = "a sweep, then gradient-based tuning from its best point"
+    tu = verb(sub, "tune", help, seeds=4, noise=None, grid=True)
+    arg(tu, "--steps", count, 30, "optimiser steps (default 30)")
+    arg(tu, "--learning-rate", positive, 0.1, "Adam's step on the log parameters (0.1)")
+
+    tr = sub.add_parser("track", help="a video to pixel tracks (KLT, forward-backward check)")
+    tr.add_argument("video", help="the video (MP4 or anything OpenCV reads, or .npz)")
+    arg(tr, "--out", None, None, "the tracks file: .npz or .csv", required=True)
+    arg(tr, "--force", help="replace the tracks file if it exists", action="store_true")
+    arg(tr, "--detector", None, "corners", "features to track", choices=("corners", "aruco"))
+    arg(tr, "--max-features", count, 200, "features alive at once (default 200)")
+    arg(tr, "--fb-threshold", positive, 0.5, "forward-backward error that drops one, px")
+    arg(tr, "--fps", positive, None, "frame rate (default: the video's)")
+    planar = "a planar scene: cut the tracks that do not follow the frames' homography"
+    arg(tr, "--planar", help=planar, action="store_true")
+    arg(tr, "--homography-threshold", positive, 3.0, "px, the --planar test (default 3)")
+    damaged = "track a video whose decoder reports damaged frames (they are concealed)"
+    arg(tr, "--allow-damaged", help=damaged, action="store_true")
+    arg(tr, "--quiet", help="no progress bar and no summary", action="store_true")
+    tr.set_defaults(out_is_file=True)
+
+    da = sub.add_parser("data", help="pixel tracks and a camera file to a problem's data file")
+    da.add_argument("problem", choices=io.PROBLEMS, help="the problem whose data file to write")
+    arg(da, "--tracks", None, None, "the tracks (visjax track's .npz or .csv)", required=True)
+    arg(da, "--camera", None, None, "the camera's constants, YAML or JSON", required=True)
+    arg(da, "--out", None, None, "the data file (.npz)", required=True)
+    arg(da, "--force", help="replace the data file if it exists", action="store_true")
+    arg(da, "--quiet", help="print nothing", action="store_true")
+    da.set_defaults(out_is_file=True)
+
+    tb = sub.add_parser("testbed", help="Jang's thesis end to end on a twin of its testbed")
+    arg(tb, "--set", set_name, None, "I.1 ... II.3 (repeatable; default all)", action="append")
+    units = "the unit of the velocities in the thesis' A matrices (default cm)"
+    arg(tb, "--units", None, "cm", units, choices=("cm", "m"))
+    arg(tb, "--duration", positive, 30.0, "seconds per set (default 30)")
+    arg(tb, "--no-video", help="no MP4 of the rendered frames", action="store_false", dest="video")
+    no_studies = "skip the camera matrix (Tables 5-1/5-2) and the v_py sensitivity"
+    arg(tb, "--no-studies", help=no_studies, action="store_false", dest="studies")
+    common(tb, "tables, estimates, figures and videos", False, "the texture's seed (0)")
+
+    r = sub.add_parser("reproduce", help="every paper's main experiment and a summary")
+    arg(r, "--quick", help=report.quick_help(), action="store_true")
+    common(r, "everything (default results)")
+    r.set_defaults(out="results")
+    with_examples(parser, sub)
+    return parser
+
+
+def _problem_parser(sub, name, old, who):
+    """A paper's command named for its problem, its name before version 0.3 an alias."""
+    p = sub.add_parser(name, aliases=[old], help=f"{who}, or your data")
+    p.set_defaults(command=name)
     return p

@@ -1,9 +1,37 @@
 """Input checks shared by every package (run before tracing, on static shapes)."""
 
+import difflib
+from collections.abc import Iterable
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
+
+
+def did_you_mean(name, choices: Iterable, *, ignore_case: bool = False) -> str:
+    """`" (did you mean 'x'?)"` naming the choice closest to `name` (difflib's ratio at
+    least 0.6), or `""` when none is close: the hint of every "unknown name" error."""
+    choices = [str(c) for c in choices]
+    if ignore_case:
+        lower = {c.lower(): c for c in choices}
+        close = difflib.get_close_matches(str(name).lower(), list(lower), n=1)
+        close = [lower[c] for c in close]
+    else:
+        close = difflib.get_close_matches(str(name), choices, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def median_interval(ts) -> jax.Array:
+    """The median interval of the sample times `ts` (n,). Concrete times (also a constant
+    inside `jit`) are reduced once in NumPy: left to XLA, a constant's median is
+    constant-folded as a sort of every interval at each compile (seconds, and XLA's
+    "slow operation" warning, for a 10,000-sample trajectory). Traced times take
+    `jnp.median` (`jit`, `vmap` and `grad` as usual)."""
+    if isinstance(ts, jax.core.Tracer):
+        return jnp.median(jnp.diff(ts))
+    with jax.ensure_compile_time_eval():
+        return jnp.asarray(np.median(np.diff(np.asarray(ts))), jnp.result_type(ts))
 
 
 def as_float(x):

@@ -1,15 +1,17 @@
-"""The `visjax` command line: argument parsing only, one library call per command
+"""The `visjax` command line: options checked, then one library call per command
 (`visjax.report` for the papers' jobs, `visjax.verbs` for `run|compare|sweep|tune` over any
-registered problem)."""
+registered problem); its grammar is `visjax._options.build_parser`."""
 
 import argparse
 import dataclasses
 import inspect
 import os
 import sys
+import warnings
 from pathlib import Path
 
-from . import __version__, _options as o, report, studies, verbs
+from . import _options as o, report, studies, verbs
+from ._options import build_parser
 from ._xla_workaround import apply_xla_cpu_workarounds
 from .estimators import MAX_STEPS
 from .io import DataFormatError, OutputConflictError, check_output_path, staged_output
@@ -17,107 +19,6 @@ from .report import RunFailed
 from .studies import Interrupted, Refused, UserCodeError, handling_signals, registered
 
 PAPER_COMMANDS = ("velocity", "moving_point", "static_points")  # with --data: `run PROBLEM`
-
-
-def build_parser() -> argparse.ArgumentParser:
-
-    parser = o.Parser(prog="visjax", description="Vision-based estimators in JAX (docs/)")
-    parser.add_argument("--version", action="version", version=f"visjax {__version__}")
-    o.arg(parser, "--import", None, None, "a module registering problems or reproductions of yours",
-         dest="modules", action="append", metavar="MODULE")  # fmt: skip
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=o.Parser)
-
-    g = sub.add_parser("geometry", help="homography and decomposition vs OpenCV vs the truth")
-    o.arg(g, "--scenes", o.count, 100, "random planar scenes (default 100)")
-    o.arg(g, "--points", o.points, 4, "points per scene, >= 4 (default 4)")
-    o.common(g, "summary.json, scenes.parquet and the figure", 0.0, "the seed (default 0)")
-
-    v = sub.add_parser("velocity", help="Chitrakaran et al.'s section 6, or your data")
-    o.arg(v, "--duration", o.positive, 10.0, "seconds (default 10)")
-    o.arg(v, "--rate", o.positive, 1000.0, "sample rate, Hz (default 1000)")
-    o.arg(v, "--K", o.six, None, "diagonal of K (default: the problem's, eq. (63))")
-    o.arg(v, "--rho", o.six, None, "diagonal of rho (default: the problem's, eq. (63))")
-    o.arg(v, "--filter-hz", o.positive, None, "with --data: a causal 2nd-order low-pass")
-    o.common(v, o.OUT, 0.0, o.FIRST, o.SEEDS, o.OWN_DATA)
-    o.arg(v, "--max-hours", o.positive, 24.0, o.HOURS)
-
-    st = _problem_parser(sub, "moving_point", "structure", "Jang's unknown input observer")
-    o.arg(st, "--set", None, None, "I.1 ... II.3 (repeatable; default: all)", action="append")
-    o.arg(st, "--duration", o.positive, 30.0, "seconds per set (default 30)")
-    o.common(st, o.OUT, 0.1, o.FIRST, o.SEEDS, o.OWN_DATA)
-    o.arg(st, "--max-hours", o.positive, 24.0, o.HOURS)
-
-    eu = _problem_parser(sub, "static_points", "euclidean", "Nath et al.'s uncalibrated camera")
-    o.arg(eu, "--duration", o.positive, 30.0, "seconds (default 30)")
-    o.common(eu, o.OUT, 0.0, o.FIRST, o.SEEDS, o.OWN_DATA)
-    o.arg(eu, "--max-hours", o.positive, 24.0, o.HOURS)
-    o.arg(eu, "--noise-px", o.nonnegative, None, argparse.SUPPRESS, dest="noise")  # 0.2's name
-
-    run = o.verb(sub, "run", "one method of a problem once", seeds=None, noise=0.0, grid=False)
-    o.arg(run, "--method", None, None, "the method (default: the estimator)")
-    help = "a problem's methods on identical noisy inputs"
-    cmp = o.verb(sub, "compare", help, seeds=4, noise=None, grid=False)
-    hours = "refuse, after the first seed, a comparison estimated to take longer (default 24)"
-    o.arg(cmp, "--max-hours", o.positive, 24.0, hours)
-    tune = "first tune every method, with the same --budget, on as many other seeds"
-    o.arg(cmp, "--tune", help=tune, action="store_true")
-    budget = f"objective evaluations per method for --tune (default {studies.BUDGET})"
-    o.arg(cmp, "--budget", o.count, studies.BUDGET, budget)
-    help = "a grid of a problem's parameters over noise seeds"
-    sw = o.verb(sub, "sweep", help, seeds=8, noise=None, grid=True)
-    o.arg(sw, "--resume", help="continue an interrupted sweep from its parts", action="store_true")
-    ray = "run the chunks on a Ray cluster (no address: a local one; pip install visjax[ray])"
-    o.arg(sw, "--ray", None, None, ray, nargs="?", const="local", metavar="ADDRESS")
-    me = sub.add_parser("merge", help="the parts of a sweep's shards as one table")
-    me.add_argument("paths", nargs="+", metavar="DIR", help="folders holding the parts")
-    o.arg(me, "--out", None, None, "runs.parquet, runs.csv and summary.json", required=True)
-    o.arg(me, "--force", help=o.FORCE, action="store_true")
-    o.arg(me, "--quiet", help="less printing", action="store_true")
-    help = "a sweep, then gradient-based tuning from its best point"
-    tu = o.verb(sub, "tune", help, seeds=4, noise=None, grid=True)
-    o.arg(tu, "--steps", o.count, 30, "optimiser steps (default 30)")
-    o.arg(tu, "--learning-rate", o.positive, 0.1, "Adam's step on the log parameters (0.1)")
-
-    tr = sub.add_parser("track", help="a video to pixel tracks (KLT, forward-backward check)")
-    tr.add_argument("video", help="the video (MP4 or anything OpenCV reads, or .npz)")
-    o.arg(tr, "--out", None, None, "the tracks file: .npz or .csv", required=True)
-    o.arg(tr, "--force", help="replace the tracks file if it exists", action="store_true")
-    o.arg(tr, "--detector", None, "corners", "features to track", choices=("corners", "aruco"))
-    o.arg(tr, "--max-features", o.count, 200, "features alive at once (default 200)")
-    o.arg(tr, "--fb-threshold", o.positive, 0.5, "forward-backward error that drops one, px")
-    o.arg(tr, "--fps", o.positive, None, "frame rate (default: the video's)")
-    planar = "a planar scene: cut the tracks that do not follow the frames' homography"
-    o.arg(tr, "--planar", help=planar, action="store_true")
-    o.arg(tr, "--homography-threshold", o.positive, 3.0, "px, the --planar test (default 3)")
-    damaged = "track a video whose decoder reports damaged frames (they are concealed)"
-    o.arg(tr, "--allow-damaged", help=damaged, action="store_true")
-    o.arg(tr, "--quiet", help="no progress bar and no summary", action="store_true")
-    tr.set_defaults(out_is_file=True)
-
-    tb = sub.add_parser("testbed", help="Jang's thesis end to end on a twin of its testbed")
-    o.arg(tb, "--set", o.set_name, None, "I.1 ... II.3 (repeatable; default all)", action="append")
-    units = "the unit of the velocities in the thesis' A matrices (default cm)"
-    o.arg(tb, "--units", None, "cm", units, choices=("cm", "m"))
-    o.arg(tb, "--duration", o.positive, 30.0, "seconds per set (default 30)")
-    o.arg(
-        tb, "--no-video", help="no MP4 of the rendered frames", action="store_false", dest="video"
-    )
-    no_studies = "skip the camera matrix (Tables 5-1/5-2) and the v_py sensitivity"
-    o.arg(tb, "--no-studies", help=no_studies, action="store_false", dest="studies")
-    o.common(tb, "tables, estimates, figures and videos", False, "the texture's seed (0)")
-
-    r = sub.add_parser("reproduce", help="every paper's main experiment and a summary")
-    o.arg(r, "--quick", help=report.quick_help(), action="store_true")
-    o.common(r, "everything (default results)")
-    r.set_defaults(out="results")
-    return parser
-
-
-def _problem_parser(sub, name, old, who):
-    """A paper's command named for its problem, its name before version 0.3 an alias."""
-    p = sub.add_parser(name, aliases=[old], help=f"{who}, or your data")
-    p.set_defaults(command=name)
-    return p
 
 
 _STUDIES = ("run", "compare", "sweep", "tune")  # built, checked, sized: `verbs.check_study`
@@ -146,8 +47,10 @@ def _call(a):
     if a.request is not None:
         verb = getattr(verbs, f"{_VERBS[a.request.command]}_command")
         return verb(a.request) if a.command == "merge" else verb(a.request, built=a.built)
-    if a.command in ("reproduce", "track"):
-        fn = getattr(report, "reproduce" if a.command == "reproduce" else "track_report")
+    if a.command in ("reproduce", "track", "data"):
+        fn = getattr(
+            report, {"track": "track_report", "data": "data_report"}.get(a.command, "reproduce")
+        )
         accepted = inspect.signature(fn).parameters
     else:
         entry = studies.registered_reproduction(a.command)
@@ -191,9 +94,17 @@ def _check(a) -> None:
     check_output_path(a.out, file=getattr(a, "out_is_file", False))
     if a.command == "track" and not Path(a.video).is_file():
         raise ValueError(f"video {a.video!r}: no such file")
+    for flag in ("tracks", "camera") if a.command == "data" else ():
+        if not Path(getattr(a, flag)).is_file():
+            raise ValueError(f"--{flag} {getattr(a, flag)!r}: no such file")
     if getattr(a, "data", None) is not None and not Path(a.data).is_file():
         raise ValueError(f"--data {a.data!r}: no such file")
     a.request = _request(a) if a.command in _VERBS or (paper and a.data is not None) else None
+
+
+def _warning_line(message, category, *_):
+    """A Python warning as the command line prints it: one line, no source location."""
+    sys.stderr.write(f"warning: {message}\n")
 
 
 def main(argv=None) -> int:
@@ -213,7 +124,8 @@ def main(argv=None) -> int:
 
     failed = None
     try:
-        with handling_signals():
+        with handling_signals(), warnings.catch_warnings():
+            warnings.showwarning = _warning_line  # restored on leaving
             try:
                 _check(args)
             except (ValueError, argparse.ArgumentTypeError) as e:  # an option, a combination

@@ -16,7 +16,8 @@ Conventions, shared by every `plot_*` function:
   set per figure through `matplotlib.rc_context`: the global `rcParams` are never changed.
 - **Truth and estimate.** The truth is drawn on top (higher zorder), black, dashed and thin;
   the estimate solid, in colour, underneath, so that a noisy estimate never hides the truth.
-  Lines carry a `gid` (`"truth"`, `"estimate"`, `"error"`) for whoever post-processes them.
+  Lines carry a `gid` (`"truth"`, `"estimate"`, `"measured"`, `"error"`) for whoever
+  post-processes them.
 - **Legends** never cover data: one figure legend below the panels (or above a panel, outside
   its axes).
 - **Axes.** Every axis that shows data is labelled with its unit in brackets: `time [s]`,
@@ -35,6 +36,7 @@ Conventions, shared by every `plot_*` function:
 """
 
 import contextlib
+import difflib
 import pathlib
 import re
 import textwrap
@@ -109,7 +111,11 @@ def figure_formats(formats) -> tuple:
     for fmt in formats:
         name = str(fmt).lower().lstrip(".")
         if name not in FORMATS:
-            raise ValueError(f"unknown figure format {fmt!r}; choose from {', '.join(FORMATS)}")
+            close = difflib.get_close_matches(name, FORMATS, n=1)  # as `_util.did_you_mean`
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ValueError(
+                f"unknown figure format {fmt!r}{hint}; choose from {', '.join(FORMATS)}"
+            )
         if name not in out:
             out.append(name)
     if not out:
@@ -169,12 +175,26 @@ def _finish(fig, title, path, formats):
     for ax in fig.axes:
         # ticks are made at draw time: keep their size when drawn outside the rc_context
         ax.tick_params(labelsize=_STYLE["xtick.labelsize"])
+        _fit_label(ax.yaxis.label, ax.get_position().height * fig.get_figheight())
+        _fit_label(ax.xaxis.label, ax.get_position().width * fig.get_figwidth())
     if path is not None:
         base = pathlib.Path(path)
         for fmt in formats:
             fig.savefig(base.with_suffix("." + fmt), format=fmt, dpi=DPI, metadata=_METADATA[fmt])
         plt.close(fig)
     return fig
+
+
+def _fit_label(text, inches: float) -> None:
+    """Wrap an axis label onto as many lines as fit `inches` of the axes' side (about
+    4.4 pt a character at 8 pt), its unit in brackets kept whole: a label longer than its
+    axes would reach off the canvas."""
+    label = text.get_text()
+    chars = max(12, int(inches * 72 / 4.4))
+    if "\n" in label or len(label) <= chars:
+        return
+    kept = re.sub(r"\[[^\]]*\]", lambda m: m.group(0).replace(" ", "\u00a0"), label)
+    text.set_text(textwrap.fill(kept, chars, break_long_words=False).replace("\u00a0", " "))
 
 
 def _legend(fig, handles, labels=None, ncol=None):
@@ -287,9 +307,11 @@ def _proxy(**kwargs):
 
 
 def _zoom_on_second_half(ax, t, err, seed_axis=True):
-    """Zoom an error axis on the steady state (the second half), where the transient would
-    dwarf it: +-4 times its largest value. `err` (N,), (S, N) with `seed_axis` (then of the
-    10-90 % band), or (N, d) without (all d components)."""
+    """Show the steady state (the second half) and the transient on one error axis: linear
+    within +-4 times the second half's largest value (shaded), logarithmic beyond it (a
+    symlog scale), so that the transient is shown, not clipped, and does not dwarf the
+    steady state. `err` (N,), (S, N) with `seed_axis` (then of the 10-90 % band), or (N, d)
+    without (all d components)."""
     err = np.asarray(err, dtype=float)
     if err.ndim == 2 and seed_axis:
         lo, _, hi = _quantiles(err)
@@ -300,7 +322,12 @@ def _zoom_on_second_half(ax, t, err, seed_axis=True):
     if not np.isfinite(part).any():
         return
     lim = 4 * max(float(np.nanmax(part)), 1e-4)
-    ax.set_ylim(-lim, lim)
+    whole = float(np.nanmax(np.abs(err))) if np.isfinite(err).any() else lim
+    if whole > lim:  # a transient beyond the steady state's range: logarithmic there
+        ax.set_yscale("symlog", linthresh=lim, linscale=2.0)
+        ax.axhspan(-lim, lim, color="0.93", zorder=0, lw=0)
+    else:
+        ax.set_ylim(-lim, lim)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -366,17 +393,27 @@ def plot_velocity(
 
 
 def plot_moving_point(
-    ts, position, estimate, *, title=None, path=None, max_points=2000, formats=("png",)
+    ts,
+    position,
+    estimate,
+    *,
+    weak=None,
+    title=None,
+    path=None,
+    max_points=2000,
+    formats=("png",),
 ):
     """Like Figs. 5-7 and 5-8 of Jang's thesis: actual (black, dashed, on top) and estimated
     (solid) position of the point in the camera frame [m] (left), and the estimation error
-    $\\hat X - X$ [mm] (right, zoomed on the steady state of the second half); with
+    $\\hat X - X$ [mm] (right: linear over the steady state of the second half, shaded,
+    logarithmic beyond it, so that the transient shows); with
     `position=None` (no truth), the estimate alone (single column).
 
     **Arguments:** `ts` (N,) [s]; `position` (N, 3) or `None`, the truth [m]; `estimate`
     (N, 3), or (S, N, 3) over S seeds (then the median and the 10-90 % band over seeds; the
-    truth may then be (N, 3) or (S, N, 3)); `max_points`, `title`, `path`, `formats` as in
-    the module's docstring. **Returns:** the `Figure`."""
+    truth may then be (N, 3) or (S, N, 3)); `weak` (N,) bool or `None`: where the depth is
+    weakly observable (shaded in every panel, e.g. `jang.weak_parallax`); `max_points`,
+    `title`, `path`, `formats` as in the module's docstring. **Returns:** the `Figure`."""
     formats = figure_formats(formats)
     ts = np.asarray(ts, dtype=float)
     est, seeds = _stacked(estimate, 2, "estimate")
@@ -405,12 +442,34 @@ def plot_moving_point(
         axes[0, 0].set_title("position of the point (camera frame)")
         axes[-1, 0].set_xlabel("time [s]")
         if truth is not None:
-            axes[0, 1].set_title("estimation error (steady state)")
+            axes[0, 1].set_title("estimation error (linear within the grey band)")
             axes[-1, 1].set_xlabel("time [s]")
         if seeds:
             handles.append(_band_handle(est.shape[0]))
+        if weak is not None and _shade_spans(axes.ravel(), ts, np.asarray(weak, bool)):
+            handles.append(_weak_handle())
         _legend(fig, handles)
         return _finish(fig, title, path, formats)
+
+
+_WEAK = {"color": "C1", "alpha": 0.15, "lw": 0}
+
+
+def _weak_handle():
+    from matplotlib.patches import Patch
+
+    return Patch(label="depth weakly observable", **_WEAK)
+
+
+def _shade_spans(axes, ts, mask) -> bool:
+    """Shade the stretches of `ts` where `mask` holds, in every axes; whether any."""
+    if mask.shape != ts.shape:
+        raise ValueError(f"`weak` must have the shape of `ts`, {ts.shape}; got {mask.shape}.")
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    for start, stop in zip(edges[::2], edges[1::2]):
+        for ax in axes:
+            ax.axvspan(ts[start], ts[stop - 1], zorder=0.5, **_WEAK)
+    return edges.size > 0
 
 
 def plot_camera_velocity(ts, v_c, *, title=None, path=None, formats=("png",), max_points=2000):
@@ -478,9 +537,9 @@ def plot_testbed(run, *, title=None, path=None, max_points=2000, formats=("png",
         fig, axes = _subplots(plt, 2, 2, DOUBLE_COLUMN, 4.6, sharex=True)
         for i in range(3):
             color = f"C{i}"
-            _series(axes[0, 0], ft, v_meas[:, 3 + i], color)
+            _series(axes[0, 0], ft, v_meas[:, 3 + i], color, ls="-.", gid="measured")
             _truth(axes[0, 0], ft, v_true[:, 3 + i])
-            _series(axes[0, 1], ft, v_meas[:, i], color)
+            _series(axes[0, 1], ft, v_meas[:, i], color, ls="-.", gid="measured")
             _truth(axes[0, 1], ft, v_true[:, i])
             _series(axes[1, 0], t, est[:, i], color)
             _truth(axes[1, 0], t, pos[:, i])
@@ -501,9 +560,10 @@ def plot_testbed(run, *, title=None, path=None, max_points=2000, formats=("png",
         for ax in axes[1]:
             ax.set_xlabel("time [s]")
         handles = [_proxy(color=f"C{i}", lw=_ESTIMATE_LW, label="xyz"[i]) for i in range(3)]
-        handles += [
-            _proxy(color="0.3", lw=_ESTIMATE_LW, label="encoders; estimate from tracked pixels"),
-            _proxy(color="k", ls="--", lw=_TRUTH["lw"], label="exact velocity; actual position"),
+        handles += [  # one meaning per line style
+            _proxy(color="0.3", lw=_ESTIMATE_LW, ls="-.", label="measured by the encoders"),
+            _proxy(color="0.3", lw=_ESTIMATE_LW, label="estimate from tracked pixels"),
+            _proxy(color="k", ls="--", lw=_TRUTH["lw"], label="truth (exact velocity, position)"),
             _proxy(color="0.3", ls=":", lw=0.8, label="error from exact pixels"),
         ]
         _legend(fig, handles, ncol=3)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .frontend import read_video, track_frames
-from .io import DataFormatError, command_summary, save_tracks_csv
+from .io import DataFormatError, command_summary, data_from_tracks, save_tracks_csv
 from .studies import (
     ROW_KEYS,
     RunFailed as RunFailed,  # raised by a command's failed run
@@ -98,6 +98,31 @@ def track_report(
             f"({summary['features_frame0']} in frame 0), "
             f"{summary['fraction_tracked']:.1%} of feature-frames since detection tracked; "
             f"tracks ended by: {lost or 'none'}; wrote {out}"
+        )
+    return summary
+
+
+def data_report(problem, tracks, camera, out, *, quiet=False) -> dict:
+    """Pixel tracks (`visjax track`'s file) and the camera's constants (a YAML or JSON
+    file, `visjax.io.data_from_tracks`) to `problem`'s data file `out` (`.npz`), checked
+    as every data file is; prints what it chose. **Returns:** `{"problem", "frames",
+    "features", "dropped_fraction"}`. Raises `visjax.io.DataFormatError` naming what is
+    missing or wrong (nothing written)."""
+    out = Path(out)
+    if out.suffix.lower() != ".npz":
+        raise ValueError(f"{out}: the data file must end in .npz.")
+    data = data_from_tracks(problem, tracks, camera)
+    data.save(out)
+    n = 1 if data.pixels.ndim == 2 else data.pixels.shape[1]
+    summary = {
+        "problem": problem, "frames": int(data.t.shape[0]), "features": int(n),
+        "dropped_fraction": float(data.dropped_fraction()),
+    }  # fmt: skip
+    if not quiet:
+        print(
+            f"{problem} data: {summary['frames']} frames, {n} feature(s), "
+            f"{summary['dropped_fraction']:.1%} of frames missing one; wrote {out}; "
+            f"next: visjax run {problem} --data {out}"
         )
     return summary
 

@@ -119,8 +119,8 @@ def _each(r: Request, items, one) -> dict:
     summary = results.get(None) if list(results) == [None] else command_summary(
         "sets", {"sets": results}, settings=settings, seed=r.seed, started=started, out=r.out
     )  # fmt: skip
-    if r.out is not None:
-        print(f"wrote {user_path(str(r.out))}")
+    none = "nothing written (no --out DIR: the summary, tables and figures were not kept)"
+    print(none if r.out is None else f"wrote {user_path(str(r.out))}")
     return summary
 
 
@@ -170,7 +170,7 @@ def run_command(r: Request, built=None) -> dict:
             print(f"{head}  {k} = {'-' if x is None else x}")
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
-            table = pd.DataFrame(studies.solution_table(sol))
+            table = pd.DataFrame(studies.solution_table(sol, p, m))
             table.to_parquet(folder / "estimates.parquet", index=False)
             save_figure(p.figure(m, sol), folder / "run.png", r.formats)
         return "run", body, folder
@@ -195,11 +195,11 @@ def compare_command(r: Request, built=None) -> dict:
 
     def one(p, head, folder):
         try:
-            study = Study(progress=not r.quiet, max_seconds=r.max_hours * 3600)
-            levels = r.noise if np.ndim(r.noise) else None
+            hours, levels = r.max_hours * 3600, r.noise if np.ndim(r.noise) else None
+            study = Study(progress=not r.quiet, max_seconds=hours, repeats=1)  # 1 timed call
             kw = {"methods": r.methods, "noise_levels": levels, "study": study}
-            budget = r.budget if r.tune else 0  # 0: the defaults, untuned
-            records, tuning = studies.compare_tuned(p, r.keys(), r.keys(True), budget, **kw)
+            kw["budget"] = r.budget if r.tune else 0  # 0: the defaults, untuned
+            records, tuning = studies.compare_tuned(p, r.keys(), r.keys(True), **kw)
         except studies.StudyTooLong as e:
             where = f"compare {r.problem} {head}".strip()
             raise Refused(f"{where}: {e}: use fewer --seeds or raise --max-hours") from None

@@ -202,9 +202,9 @@ def test_dates_and_durations_are_refused(tmp_path):
 def test_a_misspelt_key_is_named_with_the_closest_valid_one(tmp_path):
     data = _velocity()
     path = _saved(tmp_path, data, pixels=None, pixel=data.pixels)
-    _refused(path, VelocityData, "unknown key `pixel` (did you mean `pixels`?)")
+    _refused(path, VelocityData, "unknown key `pixel` (did you mean 'pixels'?)")
     path = _saved(tmp_path, _structure(), camera_vel=np.zeros((40, 6)), notes=np.zeros(1))
-    message = _refused(path, MovingPointData, "`camera_vel` (did you mean `camera_velocity`?)")
+    message = _refused(path, MovingPointData, "`camera_vel` (did you mean 'camera_velocity'?)")
     assert "`notes`;" in message  # no close match: named alone, then the valid keys
 
 

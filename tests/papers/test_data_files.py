@@ -25,6 +25,18 @@ def test_static_points_file_run_equals_its_saved_trajectory(tmp_path):
         np.linalg.norm(saved - truth, axis=-1), ev.metrics["error"][0], rtol=1e-10
     )
     assert np.max(ev.metrics["error"][0]) < 0.5  # 2 s in: converging, not diverged
+    # the tidy table of `visjax run`: one column per number, named by the problem, the
+    # truth beside each estimate; the evaluation's table names the metric's components
+    table = studies.solution_table(sol, problem, "estimator")
+    n = truth.shape[0]
+    for i in range(n):
+        for j, c in enumerate("XYZ"):
+            np.testing.assert_allclose(table[f"{c}_{i}"], sol.outputs.omega_s[:, i, j])
+            np.testing.assert_array_equal(table[f"{c}_{i}_true"], truth[i, j])
+    assert {"A_11", "A_33", "R_c_12", "x_c_0"} <= set(table) and not any("[" in k for k in table)
+    assert all(np.ndim(v) == 1 and len(v) == len(table["t"]) for v in table.values())
+    frame = ev.to_pandas()
+    assert {f"error_{i}" for i in range(n)} | {"error_worst"} <= set(frame)
     assert problem.settings()["integration_step_s"] == pytest.approx(1e-3)
     with pytest.raises(ValueError, match="`exciting` chooses the project's scene"):
         papers.static_points_problem(data=path, exciting=False)

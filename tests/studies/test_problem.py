@@ -152,7 +152,7 @@ def test_sweep_rows_equal_evaluate_and_values_checked():
         else:
             assert row["result"] == "successful"
             np.testing.assert_allclose(row["error"], ev.metrics["error"][0], rtol=1e-12)
-            np.testing.assert_allclose(row["both[1]"], row["error"] ** 2, rtol=1e-12)
+            np.testing.assert_allclose(row["both_1"], row["error"] ** 2, rtol=1e-12)
     # the baseline ignores the parameters
     base = studies.sweep(
         p, {"gain": np.array([0.5, 4.0])}, jnp.arange(1), method="baseline"

@@ -140,6 +140,57 @@ def test_compare_tuned_compares_the_tuned_points_on_other_seeds(toy):
         studies.compare(toy, np.arange(2), method_params={"gain": {"noise_px": 0.0}})
 
 
+class Counted(Toy):
+    """The toy whose solve counts its executions (a host callback per call)."""
+
+    def solve(self, method, params, inputs, *, outputs=False):
+        jax.debug.callback(lambda: CALLS.append(method))
+        return super().solve(method, params, inputs, outputs=outputs)
+
+
+CALLS: list = []
+
+
+def test_compare_times_repeats_calls_per_key_and_compiles_once(toy):
+    """`Study.repeats` timed calls per method and key: on the first key after the call
+    that compiles, on the others the first call is one of them (3 keys, repeats 2: 3 + 2
+    + 2 executions per method); `compile_s` only on the first key."""
+    CALLS.clear()
+    counted = Counted(noise_px=jnp.asarray(0.01))
+    study = studies.Study(repeats=2)
+    records = studies.compare(counted, np.arange(3), methods=["gain", "fixed"], study=study)
+    assert CALLS.count("gain") == 7 and CALLS.count("fixed") == 7
+    table = records.to_pandas()
+    assert table["compile_s"].notna().tolist() == [True, True, False, False, False, False]
+    assert (table["total_s"] > 0).all()
+
+
+def test_comparison_table_is_tidy(tmp_path):
+    """`Comparison.to_pandas`: a vector metric one column per component, named by the
+    problem (`columns`) or `name_i`; a failed run's `None` (whole or per entry) NaN in a
+    float column; the CSV holds numbers and empty cells, never a list or `None`."""
+    records = studies.Comparison(
+        [
+            {"method": "a", "seed": 0, "result": "successful", "rms": [1.0, None],
+             "err": [[1.0, 2.0]], "compile_s": 0.5, "total": 2.0},
+            {"method": "a", "seed": 1, "result": "diverged", "rms": None, "err": None,
+             "compile_s": None, "total": None},
+        ]
+    )  # fmt: skip
+    records.columns = {"rms": ("rms_v_x", "rms_v_y")}
+    table = records.to_pandas()
+    assert list(table.columns) == [
+        "method", "seed", "result", "rms_v_x", "rms_v_y", "err_0_0", "err_0_1", "compile_s",
+        "total",
+    ]  # fmt: skip
+    assert table["rms_v_x"].tolist()[0] == 1.0 and table[["rms_v_y"]].isna().all().all()
+    assert table.loc[1, ["rms_v_x", "err_0_1", "compile_s", "total"]].isna().all()
+    assert all(table[c].dtype == float for c in ("rms_v_x", "err_0_0", "compile_s", "total"))
+    studies.save_table(table, tmp_path, "records")
+    text = (tmp_path / "records.csv").read_text()
+    assert "None" not in text and "[" not in text
+
+
 def test_compare_tune_on_the_command_line(toy, tmp_path):
     """`visjax compare PROBLEM --tune --budget N`: the summary's `tuning` (the tuned
     parameters, the training seeds after the test seeds) and `tuning.parquet`."""

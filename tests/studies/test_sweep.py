@@ -71,12 +71,12 @@ def test_table_rows_flags_and_summary(tmp_path):
     ).to_pandas()
     assert len(table) == 12 and list(table["seed"][:4]) == [0, 1, 2, 0]
     assert list(table.columns[:4]) == ["run", "point", "a", "seed"]
-    assert {"result", "failed_sample", "m", "v[0]", "v[2]"} <= set(table.columns)
+    assert {"result", "failed_sample", "m", "v_0", "v_2"} <= set(table.columns)
     # each row is the unbatched run of its point and seed
     for _, row in table.iterrows():
         sol = toy({"a": jnp.asarray(row["a"])}, jax.random.key(int(row["seed"])))
         if row["result"] == "successful":
-            np.testing.assert_allclose(row["v[1]"], sol.value[1], rtol=0, atol=1e-15)
+            np.testing.assert_allclose(row["v_1"], sol.value[1], rtol=0, atol=1e-15)
     # a diverging point: its code, its sample, NaN metrics (never the frozen numbers)
     div = table[table["a"] == 6.0]
     assert set(div["result"]) == {"diverged"} and set(div["failed_sample"]) == {3}
@@ -142,7 +142,10 @@ def test_velocity_rows_equal_one_by_one_and_divergence_flagged(velocity):
         p = {"K_scale": jnp.asarray(row["K_scale"]), "rho_scale": jnp.asarray(row["rho_scale"])}
         m = one(p, jax.random.key(int(row["seed"])))
         np.testing.assert_allclose(
-            row[[f"rms[{i}]" for i in range(6)]].to_numpy(float), m["rms"][0], rtol=1e-12, atol=0
+            row[[f"rms_{a}" for a in papers.chitrakaran.AXES]].to_numpy(float),
+            m["rms"][0],
+            rtol=1e-12,
+            atol=0,
         )
     # a parameter is the parameter: the gain K itself (the published one times 0.01) runs
     # as its multiplier does
@@ -343,6 +346,23 @@ def test_tune_finds_minimum_in_log_parameters(method):
     assert r.params["a"] == pytest.approx(3.0, rel=tol)
     assert r.params["b"] == pytest.approx(np.exp(-1.0), rel=tol)
     assert r.loss < r.loss0 and r.converged
+    assert r.improved and r.best_step > 0 and r.not_improved_line() is None
+
+
+@pytest.mark.parametrize("method", ["optax", "optimistix"])
+def test_tune_that_cannot_improve_returns_its_start_and_says_so(method):
+    """Started at the bowl's minimum, no step lowers the loss: `tune` returns the start
+    (`best_step` 0, `improved` False) and warns, naming the start's loss."""
+    import optimistix as optx
+
+    opt = optax.adam(0.5) if method == "optax" else optx.BFGS(rtol=1e-8, atol=1e-10)
+    problem = studies.FunctionProblem(bowl, lambda s: {"value": s.value}, metric="value")
+    start = {"a": 3.0, "b": float(np.exp(-1.0))}
+    with pytest.warns(UserWarning, match="did not improve on its start") as caught:
+        r = studies.tune(problem, start, jnp.arange(2), optimiser=opt, steps=3)
+    assert not r.improved and r.best_step == 0 and r.loss == r.loss0
+    assert r.params == pytest.approx(start, rel=1e-12)
+    assert f"{r.loss0:.4g}" in str(caught[0].message)
 
 
 @pytest.mark.slow

@@ -30,7 +30,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._results import RESULTS, all_finite, raise_or_keep
 from .._small import spd_solve
-from .._util import as_float, check_shape, solver_tolerance
+from .._util import as_float, check_shape, median_interval, solver_tolerance
 from ..estimators import FixedCamera, Solution, VelocityOutput
 from ..geometry import euclidean_reconstruction, so3_exp, so3_log
 from ._ekf import AbstractEKFModel, baseline_solution, extended_kalman_filter
@@ -549,7 +549,7 @@ def velocity_ekf(
     x0 = jnp.concatenate(
         [jnp.where(jnp.isfinite(first.x_f[0]), first.x_f[0], 0.0), jnp.zeros(15, A.dtype)]
     )
-    T = jnp.median(jnp.diff(ts))
+    T = median_interval(ts)
     model = _ConstantAcceleration(
         A=A,
         s=s,

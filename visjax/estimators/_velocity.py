@@ -37,7 +37,14 @@ from .._small import (
     sskew,
     stranspose,
 )
-from .._util import as_float, check_points, check_shape, chunked_map, positive_finite
+from .._util import (
+    as_float,
+    check_points,
+    check_shape,
+    chunked_map,
+    median_interval,
+    positive_finite,
+)
 from ..geometry import (
     L_omega,
     L_omega_inv,
@@ -974,6 +981,6 @@ def velocity_innovation(
     used = (k >= 0) & (t >= t_start) & (t < t_end)
     if stream.present is not None:
         used = used & stream.present
-    h = jnp.median(jnp.diff(t)) if step is None else step
+    h = median_interval(t) if step is None else step
     floor = 4.0 / jnp.pi * estimator.rho * h / (estimator.K + 1.0)  # the sign term's chatter
     return innovation(y.e, e_tilde, used, floor)

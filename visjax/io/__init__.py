@@ -29,6 +29,14 @@ from ._formats import (
     read_npz as read_npz,
     save_tracks_csv as save_tracks_csv,
 )
+from ._from_tracks import (
+    COPLANAR_PX as COPLANAR_PX,
+    PROBLEMS as PROBLEMS,
+    choose_coplanar as choose_coplanar,
+    data_from_tracks as data_from_tracks,
+    read_camera_file as read_camera_file,
+    read_tracks as read_tracks,
+)
 from ._outputs import (
     ARRAYS as ARRAYS,
     COMMON as COMMON,

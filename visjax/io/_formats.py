@@ -84,7 +84,6 @@ rests on too few frames.
 """
 
 import csv
-import difflib
 import math
 import os
 import zipfile
@@ -94,6 +93,8 @@ from pathlib import Path
 
 import numpy as np
 import numpy.lib.format as npy_format
+
+from .._util import did_you_mean
 
 MAX_DATA_BYTES = 2 * 1024**3
 """The most bytes a data file's arrays may take once read (the sum of the uncompressed
@@ -478,13 +479,7 @@ class _Format:
             keys = _npz_keys(path, zf)
             unknown = [k for k in keys if k not in known and k != "missing_value"]
             if unknown:
-                named = ", ".join(
-                    f"`{k}`"
-                    + "".join(
-                        f" (did you mean `{m}`?)" for m in difflib.get_close_matches(k, known, n=1)
-                    )
-                    for k in unknown
-                )
+                named = ", ".join(f"`{k}`{did_you_mean(k, known)}" for k in unknown)
                 raise DataFormatError(
                     f"{path}: unknown key{'s' if len(unknown) > 1 else ''} {named}; the "
                     f"{cls.NAME} format's keys are {', '.join(known)} (and missing_value)."

@@ -289,6 +289,12 @@ SUMMARIES = {
         "steps": ("int", "optimiser steps"),
         "optimiser": ("str", "the optimiser"),
         "training_loss": ("dict", "`sweep_best` and `tuned` training loss"),
+        "tuning_improved": (
+            "bool",
+            "a step's training loss was below the start's (`false`: "
+            "the tuned point is the sweep's best)",
+        ),
+        "tuned_step": ("int", "the optimiser step of the tuned point (0: the start)"),
         "tuned_gains": ("dict", "the tuned gains"),
         "paper_gains": ("dict", "the paper's gains"),
         "held_out_failed_runs": ("dict", "failed held-out runs per point"),
@@ -366,8 +372,10 @@ SUMMARIES = {
 
 TABLES = {
     "run/estimates.parquet": {
-        "t": "float",
-        "<output>[i]": "float (each component of each saved output of the method)",
+        "t": "float (s)",
+        "<column>": "float (each component of each saved output of the method, named by the "
+        "problem: docs/tables.md)",
+        "<column>_true": "float (the truth beside an estimate that has one)",
     },
     "geometry/scenes.parquet": {
         "scene": "int",
@@ -388,12 +396,19 @@ TABLES = {
         "set": "str",
         "table": "str",
         "axis": "str",
-        "units": "str",
         "rms_m": "float",
         "rms_frames_m": "float",
         "rms_ideal_pixels_m": "float",
         "thesis_rms_m": "float",
         "feasible": "bool",
+    },
+    "testbed/sensitivity.parquet": {
+        "set": "str (a moving set)",
+        "v_py_amplitude_<unit>_s": "float (`<unit>` the `--units` of the A matrices: cm or m)",
+        "axis": "str (x, y, z)",
+        "rms_m": "float (NaN: infeasible)",
+        "feasible": "bool",
+        "result": "str",
     },
     "compare/tuning.parquet": {
         "method": "str",

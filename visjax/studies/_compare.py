@@ -15,6 +15,7 @@ from .._results import RESULTS, result_names
 from ._problem import AbstractProblem, as_json, method_runs
 from ._stats import bootstrap_interval, paired_comparison
 from ._study import Result, Study, seed_keys, study_of
+from ._sweep import component_names
 from ._verdict import judge_records
 
 
@@ -25,12 +26,39 @@ class StudyTooLong(ValueError):
 
 class Comparison(Result, list):
     """What `compare` returns: the records (a list of dicts, one per method and key) and
-    `to_pandas()`, them as a table; `medians(metric)`, one row per method."""
+    `to_pandas()`, them as a tidy table; `medians(metric)`, one row per method. `columns`:
+    the problem's names of the metrics' components (`AbstractProblem.columns`)."""
+
+    columns: Mapping[str, Any] = {}
 
     def to_pandas(self):
+        """One row per method and key, one column per number: a vector-valued metric's
+        components as columns named by the problem (`rms_v_x`, ..., else `rms_0`, ...),
+        a failed run's metrics NaN (never a list, never `None`)."""
         import pandas as pd
 
-        return pd.DataFrame(list(self))
+        shapes = {}  # a vector-valued entry's shape, from the records that have one
+        for record in self:
+            for k, v in record.items():
+                if isinstance(v, list | tuple):
+                    shapes.setdefault(k, np.shape(v))
+        rows = []
+        for record in self:
+            row = {}
+            for k, v in record.items():
+                if k in shapes:  # `None` (a failed run): NaN components
+                    a = np.full(shapes[k], np.nan) if v is None else np.asarray(v, object)
+                    a = np.asarray([np.nan if x is None else x for x in a.ravel()], float)
+                    names = component_names(k, shapes[k], self.columns.get(k))
+                    row.update(zip(names, a, strict=True))
+                else:
+                    row[k] = v
+            rows.append(row)
+        table = pd.DataFrame(rows)
+        for k in table.columns:  # a metric `None` in every failed record: NaN, a float column
+            if table[k].dtype == object and table[k].map(_number_or_none).all():
+                table[k] = table[k].astype(float)
+        return table
 
     def medians(self, metric: str) -> list[dict]:
         """Per method, in the records' order: `method`, `failed` (runs that did not
@@ -269,8 +297,9 @@ def compare(
     - `methods`: the methods to run, in this order (default: every one).
     - `noise_levels`: pixel noise levels (px): the comparison at each (the problem's data
         parameter `noise_px`, the same keys), each record tagged with its `noise_px`.
-    - `study`: a `Study`: its `repeats` (timed calls per method and key, after the
-        compiling one; the median is reported), `progress` and `max_seconds` (a limit on
+    - `study`: a `Study`: its `repeats` (timed calls per method and key, the median
+        reported: on the first key after the call that compiles, on the others the first
+        call is one of them), `progress` and `max_seconds` (a limit on
         the whole comparison's run time: after the first key the rest is estimated from
         it, compilation excluded; past the limit, `StudyTooLong` is raised, naming the
         estimate).
@@ -293,6 +322,7 @@ def compare(
         if not levels or not all(np.isfinite(x) and x >= 0 for x in levels):
             raise ValueError(f"`noise_levels` must be finite levels >= 0; got {noise_levels!r}.")
         out = Comparison()
+        out.columns = problem.columns
         for x in levels:
             at = {**dict(params or {}), "noise_px": x}
             for r in compare(
@@ -330,10 +360,12 @@ def compare(
 
     runs = method_runs(resolved, params, methods, method_params)
     updates = {m: own.updates(m) for m, (_, own) in runs.items()}
-    return _compare(
+    records = _compare(
         {m: solve for m, (solve, _) in runs.items()}, problem_inputs, problem_score, typed,
         seed_values, updates, study,
     )  # fmt: skip
+    records.columns = problem.columns
+    return records
 
 
 def _version3(methods, inputs=None, score=None, *, params=None, study=None, **legacy):
@@ -399,13 +431,13 @@ def _compare(methods, inputs, score, typed, seed_values, updates, study) -> Comp
             t0 = time.perf_counter()
             sol = jax.block_until_ready(fn(data))
             first = time.perf_counter() - t0
-            times = []
-            for _ in range(study.repeats):
+            times = [] if i == 0 else [first]  # past the first key, no call compiles
+            for _ in range(study.repeats - len(times)):
                 t0 = time.perf_counter()
                 jax.block_until_ready(fn(data))
                 times.append(time.perf_counter() - t0)
             total = statistics.median(times)
-            seed_s += sum(times) + (total if i == 0 else first)
+            seed_s += sum(times)  # what each later key costs: `repeats` calls
             records.append(
                 {
                     "method": name,
@@ -432,6 +464,10 @@ def _compare(methods, inputs, score, typed, seed_values, updates, study) -> Comp
             raise KeyboardInterrupt("the comparison was asked to stop")
     bar.close()
     return records
+
+
+def _number_or_none(x) -> bool:
+    return x is None or (isinstance(x, int | float | np.number) and not isinstance(x, bool))
 
 
 def _duration(seconds: float) -> str:

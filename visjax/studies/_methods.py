@@ -118,6 +118,14 @@ class WithMethods(AbstractProblem):
         return self.base.title
 
     @property
+    def columns(self) -> Mapping[str, Any]:
+        return self.base.columns
+
+    @property
+    def units(self) -> Mapping[str, str]:
+        return self.base.units
+
+    @property
     def scored(self) -> bool:
         return self.base.scored
 
@@ -209,6 +217,12 @@ class WithMethods(AbstractProblem):
 
     def trivial(self) -> dict:
         return self.base.trivial()
+
+    def truth_outputs(self, method: str | None, solution) -> dict:
+        m = self._own(method) if method is not None else None
+        if m is not None and m.like is None:
+            return {}
+        return self.base.truth_outputs(method if m is None else m.like, solution)
 
     def updates(self, method: str) -> int:
         m = self._own(method)

@@ -4,7 +4,6 @@ and values among a problem's parameters; and the two workflows the commands run:
 `sweep_then_hold_out` (a sweep, its best point, it and the defaults on held-out keys)
 and `sweep_then_tune` (the same, then gradient descent from the sweep's best)."""
 
-import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -13,6 +12,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from .._util import did_you_mean
 from ._problem import AbstractProblem, check_values
 from ._study import Refused, Result, Study
 from ._sweep import SweepResult, available_memory, best, held_out, parse_grid, summarise, sweep
@@ -215,9 +215,7 @@ def check_grid(problem: AbstractProblem, spec: str, where: str) -> dict:
     specs = problem.parameters()
     for axis in params:
         if axis not in specs:
-            lower = {k.lower(): k for k in specs}
-            close = difflib.get_close_matches(axis.lower(), list(lower), n=1)
-            hint = f" (did you mean {lower[close[0]]!r}?)" if close else ""
+            hint = did_you_mean(axis, specs, ignore_case=True)
             raise Refused(
                 f"--grid: {where} has no parameter {axis!r}{hint}; its parameters: "
                 f"{', '.join(sorted(specs))}"
@@ -289,6 +287,7 @@ class Selection(Result):
             "best": point["tuned"], "sweep_best": point["sweep best"],
             "improvement_over_paper": point["paper"]["metric"] / point["tuned"]["metric"],
             "training_loss": {"sweep_best": self.tuned.loss0, "tuned": self.tuned.loss},
+            "tuning_improved": self.tuned.improved, "tuned_step": self.tuned.best_step,
             "tuned_gains": problem.gains(chosen),
             "held_out_failed_runs": {k: v["failed"] for k, v in self.held.items()},
             **problem.checks(chosen),

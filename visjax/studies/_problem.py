@@ -10,8 +10,8 @@ methods take (`parameters`: defaults, units, positivity) and how a solution is s
 
 import abc
 import dataclasses
-import difflib
 import hashlib
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS, all_finite, result_names
+from .._util import did_you_mean
 from ._study import Result
 
 
@@ -167,7 +168,12 @@ class AbstractProblem(eqx.Module):
     solution)` (a matplotlib figure of one solution against the truth); and
     `defaults_label` (what printed reports and figures call the default parameters:
     `"paper"` where they are a paper's published gains, else e.g. `"defaults"`; the
-    summaries' JSON key stays `paper`).
+    summaries' JSON key stays `paper`); `columns` (a vector-valued metric, parameter or
+    output field -> the names of its components' table columns, a tuple or a function of
+    its shape: `{"rms": ("rms_v_x", ...), "v_hat": ("v_x", ...)}`; default `name_i`) and
+    `units` (a column or field -> its unit, documented with the tables:
+    `column_units`); `truth_outputs(method, solution)` (the truth at the solution's
+    times, beside the estimate in `visjax run`'s table).
     """
 
     methods: eqx.AbstractClassVar[tuple[str, ...]]
@@ -179,6 +185,8 @@ class AbstractProblem(eqx.Module):
     data_parameters: ClassVar[tuple[str, ...]] = ()
     structural_parameters: ClassVar[tuple[str, ...]] = ()
     own_parameters: ClassVar[Mapping[str, tuple[str, ...]]] = {}
+    columns: ClassVar[Mapping[str, Any]] = {}
+    units: ClassVar[Mapping[str, str]] = {}
 
     @abc.abstractmethod
     def parameters(self) -> dict[str, Parameter]:
@@ -229,6 +237,12 @@ class AbstractProblem(eqx.Module):
         (`None` where NaN). Default: none."""
         return {}
 
+    def truth_outputs(self, method: str | None, solution) -> dict[str, Any]:
+        """Output field -> the true value at `solution.ts` (the solution's saved times),
+        for the fields of `method`'s outputs that have a truth: the tables of `visjax run`
+        put each beside its estimate (`<column>_true`, `solution_table`). Default: none."""
+        return {}
+
     def trivial(self) -> dict[str, jax.Array]:
         """Name -> array: the metrics of the trivial estimate (`trivial_label`: what one
         would answer knowing nothing, e.g. zero velocity or the initial guess held), with
@@ -261,9 +275,12 @@ class AbstractProblem(eqx.Module):
             return fig
         fig, axes = plt.subplots(len(fields), 1, figsize=(7, 2.2 * len(fields)), squeeze=False)
         for ax, (name, values) in zip(axes[:, 0], fields.items()):
-            ax.plot(np.asarray(solution.ts), values.reshape(values.shape[0], -1))
-            ax.set_ylabel(name)
-        axes[-1, 0].set_xlabel("t (s)")
+            names = component_names(name, values.shape[1:], self.columns.get(name))
+            lines = ax.plot(np.asarray(solution.ts), values.reshape(values.shape[0], -1))
+            ax.set_ylabel(f"{name} [{self.units.get(name, '?')}]")  # `?`: no `units` given
+            if 1 < len(lines) <= 8:
+                ax.legend(lines, names, fontsize=7, ncol=min(4, len(lines)))
+        axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(f"{self.title}: {method}")
         fig.tight_layout()
         return fig
@@ -358,8 +375,7 @@ class AbstractProblem(eqx.Module):
         if method is None:
             return self.methods[0]
         if method not in self.methods:
-            close = difflib.get_close_matches(str(method), list(self.methods), n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            hint = did_you_mean(method, self.methods)
             raise ValueError(
                 f"{self.title}: unknown method {method!r}{hint}; its methods are "
                 f"{list(self.methods)} (a method of your own: visjax.studies.add_method)."
@@ -603,16 +619,30 @@ def runner(
     return _Run(problem, method, problem.resolve(fixed))
 
 
+def component_names(name: str, shape, names=None) -> list[str]:
+    """The column names of the components of an array of `shape` (one row's) named
+    `name`: `names` (a sequence, or a function of the shape returning one) where it has
+    one per component, else `name_i` (`name_i_j` for a matrix; indices from 0)."""
+    shape = tuple(shape)
+    if callable(names):
+        names = names(shape)
+    size = math.prod(shape)
+    if names is not None and len(names) == size:
+        return [str(n) for n in names]
+    return [f"{name}_{'_'.join(map(str, ix))}" for ix in np.ndindex(*shape)]
+
+
 class Evaluation(Result, eqx.Module):
     """What `evaluate` returns, one entry per key: `metrics` (name -> array with a leading
     key axis; NaN where the run failed), `result` (a `RESULTS` item per key) and
     `failed_sample` (per key, -1 if none). A pytree (it comes out of `jit` and `grad`);
     `to_pandas()`: one row per key (`key`, `result`, `failed_sample`, the metrics, an
-    array metric one column per component)."""
+    array metric one column per component, named by the problem's `columns`)."""
 
     metrics: dict
     result: RESULTS
     failed_sample: jax.Array
+    columns: tuple = eqx.field(static=True, default=())  # the problem's, as items
 
     def to_pandas(self):
         import pandas as pd
@@ -621,11 +651,12 @@ class Evaluation(Result, eqx.Module):
         rows = {"key": np.arange(failed.shape[0]), "result": result_names(self.result)}
         rows["failed_sample"] = failed
         for name, values in self.metrics.items():
-            v = np.asarray(values).reshape(failed.shape[0], -1)
-            if v.shape[1] == 1:
-                rows[name] = v[:, 0]
+            values = np.asarray(values)
+            if values.ndim == 1:
+                rows[name] = values
             else:
-                rows.update({f"{name}[{i}]": v[:, i] for i in range(v.shape[1])})
+                names = component_names(name, values.shape[1:], dict(self.columns).get(name))
+                rows.update(zip(names, values.reshape(failed.shape[0], -1).T, strict=True))
         return pd.DataFrame(rows)
 
 
@@ -658,7 +689,7 @@ def evaluate(
             )
         keys = jax.vmap(jax.random.key)(keys)
     values, result, failed = _evaluate_keys(runner(problem, method, params, check=False), keys)
-    return Evaluation(values, result, failed)
+    return Evaluation(values, result, failed, tuple(problem.columns.items()))
 
 
 @eqx.filter_jit  # compiled once per problem type, shapes and settings (its arrays traced)

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from .._util import did_you_mean
 from ..estimators import MAX_STEPS
 from ..io import output_name
 from ._methods import Method, WithMethods, check_added
@@ -83,8 +84,9 @@ class Registered:
                 raise ValueError(f"problem {self.name!r} takes no --{option.removesuffix('_hz')}")
         bad = [v for v in variants or () if v not in self.variants]
         if bad:
+            hint = did_you_mean(bad[0], self.variants)
             raise ValueError(
-                f"unknown variant(s) {bad} of problem {self.name!r}; choose from "
+                f"unknown variant(s) {bad} of problem {self.name!r}{hint}; choose from "
                 f"{list(self.variants)}"
             )
 
@@ -329,7 +331,8 @@ def registered(name: str) -> Registered:
     if name in _BROKEN:
         raise ValueError(_BROKEN[name])
     if name not in _REGISTRY:
-        raise ValueError(f"unknown problem {name!r}; choose from {problem_names()}")
+        hint = did_you_mean(name, problem_names())
+        raise ValueError(f"unknown problem {name!r}{hint}; choose from {problem_names()}")
     return _REGISTRY[name]
 
 

@@ -19,12 +19,13 @@ paper's law assigns; `trivial`, the error of a trivial estimate, e.g. zero veloc
 
 import contextlib
 import dataclasses
-import difflib
 import math
 import re
 from collections.abc import Callable, Sequence
 
 import jax
+
+from .._util import did_you_mean
 
 ROW_KEYS = ("name", "value", "reference", "reference_kind", "unit")
 """The keys of a row of `visjax reproduce`'s table, in its columns' order."""
@@ -123,8 +124,7 @@ def reproduction_names() -> list[str]:
 def registered_reproduction(name: str) -> RegisteredReproduction:
     """The registry entry of `name`. **Raises:** `ValueError` listing the names."""
     if name not in _REPRODUCTIONS:
-        close = difflib.get_close_matches(str(name), list(_REPRODUCTIONS), n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        hint = did_you_mean(name, _REPRODUCTIONS)
         raise ValueError(f"unknown reproduction {name!r}{hint}; choose from {reproduction_names()}")
     return _REPRODUCTIONS[name]
 

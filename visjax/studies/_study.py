@@ -62,7 +62,8 @@ class Study(eqx.Module):
     - `log`: `line -> None` for what a study says as it goes (memory, time estimates).
     - `stop`: `() -> bool`, asked after each chunk or seed: `True` ends the study there
         with `KeyboardInterrupt`, every finished chunk written (`interruptible` gives one).
-    - `repeats`: timed calls per method and key in `compare` (the median is reported).
+    - `repeats`: timed calls per method and key in `compare` (the median is reported;
+        on the first key they follow the call that compiles).
     - `max_seconds`: `compare`'s limit on its whole run time, checked after the first key
         (`StudyTooLong`).
     """

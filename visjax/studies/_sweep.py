@@ -23,7 +23,14 @@ from jax.sharding import NamedSharding, PartitionSpec
 from .._results import RESULTS, all_finite
 from .._xla_workaround import warn_if_hang_prone
 from ._parts import Parts
-from ._problem import AbstractProblem, FunctionProblem, check_values, run_identity, runner
+from ._problem import (
+    AbstractProblem,
+    FunctionProblem,
+    check_values,
+    component_names,
+    run_identity,
+    runner,
+)
 from ._study import Refused, Result, Study, study_of
 
 
@@ -62,17 +69,33 @@ def parse_grid(spec: str) -> dict[str, np.ndarray]:
         name, body = (s.strip() for s in part.split("=", 1))
         if not name or name in axes:
             raise ValueError(f"grid axis name {name!r} is empty or repeated in {spec!r}.")
-        try:
-            if ":" in body:
-                low, high, num = body.split(":")
-                axes[name] = log_axis(float(low), float(high), int(num))
-            else:
-                axes[name] = np.array([float(v) for v in body.split("/")])
-        except ValueError as err:
-            raise ValueError(f"grid axis {part!r}: {err}") from None
+        if ":" in body:
+            bits = body.split(":")
+            if len(bits) != 3:
+                raise ValueError(
+                    f"grid axis {part!r}: a log axis reads name=low:high:num, three numbers "
+                    f"(e.g. {name}=0.01:10:8); got {len(bits)}"
+                )
+            low, high = (_grid_number(b, part, float) for b in bits[:2])
+            num = _grid_number(bits[2], part, int)
+            try:
+                axes[name] = log_axis(low, high, num)
+            except ValueError as err:
+                raise ValueError(f"grid axis {part!r}: {err}") from None
+        else:
+            axes[name] = np.array([_grid_number(v, part, float) for v in body.split("/")])
     if not axes:
         raise ValueError(f"the grid spec {spec!r} names no axis.")
     return grid(**axes)
+
+
+def _grid_number(text: str, part: str, kind):
+    """One number of a grid axis `part`, or a `ValueError` naming it."""
+    try:
+        return kind(text.strip())
+    except ValueError:
+        what = "a whole number of points" if kind is int else "a number"
+        raise ValueError(f"grid axis {part!r}: {text.strip()!r} is not {what}") from None
 
 
 def random_points(key, num: int, **ranges: Any) -> dict[str, np.ndarray]:
@@ -100,24 +123,26 @@ def _leaf_name(path) -> str:
     return ".".join(parts)
 
 
-def _columns(name: str, values: np.ndarray) -> dict[str, np.ndarray]:
-    """A (R, ...) array as table columns: `name` for scalars, `name[i]` (or `name[i,j]`)
-    for the components of a vector (or matrix)."""
+def _columns(name: str, values: np.ndarray, names=None) -> dict[str, np.ndarray]:
+    """A (R, ...) array as table columns, one per component, never list-valued: `name`
+    for scalars; for a vector or matrix the names `names` gives (a problem's `columns`
+    entry for `name`, `component_names`), else `name_i` (`name_i_j`)."""
     values = np.asarray(values)
     if values.ndim == 1:
         return {name: values}
     flat = values.reshape(values.shape[0], -1)
-    return {
-        f"{name}[{','.join(map(str, ix))}]": flat[:, i]
-        for i, ix in enumerate(np.ndindex(*values.shape[1:]))
-    }
+    return dict(zip(component_names(name, values.shape[1:], names), flat.T, strict=True))
 
 
-def solution_table(solution) -> dict[str, np.ndarray]:
+def solution_table(solution, problem=None, method: str | None = None) -> dict[str, np.ndarray]:
     """The saved outputs of one solution (`studies.solution`) as table columns: `t`, then
-    each output field's components (`name[i]`, `name[i,j]`), for a pandas `DataFrame`.
-    Fields not saved at every time are left out."""
+    each output field's components (the problem's `columns` names: `v_x`, ..., else
+    `name_i`), and where the problem knows it (`AbstractProblem.truth_outputs`) the truth
+    beside each as `<column>_true`; for a pandas `DataFrame`. Fields not saved at every
+    time are left out."""
     table = {"t": np.asarray(solution.ts)}
+    columns = {} if problem is None else problem.columns
+    truth = {} if problem is None else problem.truth_outputs(method, solution)
     outputs = solution.outputs
     items = outputs.items() if isinstance(outputs, dict) else vars(outputs).items()
     for name, v in items:
@@ -125,7 +150,11 @@ def solution_table(solution) -> dict[str, np.ndarray]:
             continue
         v = np.asarray(v)
         if v.shape[0] == table["t"].shape[0]:
-            table.update(_columns(name, v))
+            table.update(_columns(name, v, columns.get(name)))
+            if truth.get(name) is not None:
+                true = np.broadcast_to(np.asarray(truth[name]), v.shape)
+                named = _columns(name, true, columns.get(name))
+                table.update({f"{k}_true": x for k, x in named.items()})
     return table
 
 
@@ -181,7 +210,8 @@ def sweep(
 
     - `problem`: an `AbstractProblem`; its `metrics` are computed inside the batch
         (floating scalars or small arrays; an array becomes one column per component,
-        `name[i]`); a solution's `failed_sample`, if it has one, goes into the table.
+        named by the problem's `columns`, else `name_i`); a solution's `failed_sample`,
+        if it has one, goes into the table.
     - `points`: name -> values with a common leading axis P (the points; `grid`,
         `parse_grid` or `random_points` build one; a `FunctionProblem`'s: any pytree).
     - `keys`: S noise seeds: a 1-D array of ints (`jax.random.key(seed)` each) or of typed
@@ -231,7 +261,7 @@ def sweep(
     **Returns:** a `SweepResult`; its `to_pandas()` (the table) has one row per run
     (point-major, the seed fastest):
     `run`, `point` (the parameter point's index), the parameters (leaf names joined by `.`,
-    components as `name[i]`), `seed`, `result` (the result code's name), `failed_sample`
+    components named as the metrics'), `seed`, `result` (the result code's name), `failed_sample`
     (-1 if none) and the metrics. A failed run keeps its row and its code; its metrics are
     NaN, never its frozen state's numbers. A run that reports success but whose metric is
     not finite is marked `nonfinite_output`. With `shard`, the rows of the shard's runs.
@@ -323,7 +353,10 @@ def sweep(
 
     def frame(idx, out):
         values, codes, failed = jax.tree_util.tree_map(lambda x: np.asarray(x)[: idx.size], out)
-        return _frame(idx, leaves_with_path, leaves, n_seeds, seed_values, values, codes, failed)
+        return _frame(
+            idx, leaves_with_path, leaves, n_seeds, seed_values, values, codes, failed,
+            problem.columns,
+        )  # fmt: skip
 
     frames = {c: store.read(c) for c, _ in plan if c in done}
     from tqdm import tqdm
@@ -422,19 +455,21 @@ def _identity(source: str, leaves, key_data, chunk) -> str:
     return h.hexdigest()
 
 
-def _frame(idx, leaves_with_path, leaves, n_seeds, seed_values, values, codes, failed):
-    """The table rows of the runs `idx` from their computed values."""
+def _frame(idx, leaves_with_path, leaves, n_seeds, seed_values, values, codes, failed, names):
+    """The table rows of the runs `idx` from their computed values (`names`: the
+    problem's `columns`)."""
     import pandas as pd
 
     table = {"run": idx.astype(np.int64), "point": (idx // n_seeds).astype(np.int64)}
     for (path, _), leaf in zip(leaves_with_path, leaves):
-        table.update(_columns(_leaf_name(path) or "param", leaf[idx // n_seeds]))
+        name = _leaf_name(path) or "param"
+        table.update(_columns(name, leaf[idx // n_seeds], names.get(name)))
     table["seed"] = seed_values[idx % n_seeds]
-    names = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
-    table["result"] = [names[int(v)] for v in codes]
+    codes_named = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
+    table["result"] = [codes_named[int(v)] for v in codes]
     table["failed_sample"] = failed
     for name, v in values.items():
-        table.update(_columns(name, v))
+        table.update(_columns(name, v, names.get(name)))
     return pd.DataFrame(table)
 
 

@@ -1,6 +1,7 @@
 """`tune`: gradient-based gain tuning through the runner, in log parameters (gains stay
 positive), with an optax optimiser or an optimistix minimiser."""
 
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -11,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS
-from ._problem import AbstractProblem, FunctionProblem, check_values, runner
+from ._problem import AbstractProblem, FunctionProblem, check_values, component_names, runner
 from ._study import Result, Study, study_of
 from ._sweep import _key_data
 
@@ -23,7 +24,11 @@ class TuneResult(Result):
     **Fields:** `params` (the best point met, name -> float or array), `loss` (its loss),
     `params0`, `loss0` (the start), `history` (one dict per step: `step`, `loss`, and the
     parameters; loads in pandas), `converged` (the optimistix minimiser's result was
-    successful; always `True` for a fixed number of optax steps)."""
+    successful; always `True` for a fixed number of optax steps), `best_step` (the step
+    of the best point met: 0 is the start).
+
+    `improved` is `False` when no step's loss was below the start's: then `params` *is*
+    `params0` (the best point met), and `tune` has said so with a `UserWarning`."""
 
     params: dict
     loss: float
@@ -31,6 +36,25 @@ class TuneResult(Result):
     loss0: float
     history: list = field(default_factory=list)
     converged: bool = True
+    best_step: int = 0
+
+    @property
+    def improved(self) -> bool:
+        """Whether the best point met is better than the start (its loss strictly lower)."""
+        return self.best_step > 0 and self.loss < self.loss0
+
+    def not_improved_line(self) -> str | None:
+        """`None` after an improvement; else one sentence saying the tuning ended at its
+        start, with the start's loss and the best loss any step reached."""
+        if self.improved:
+            return None
+        later = [h["loss"] for h in self.history if h["step"] > 0]
+        finite = [x for x in later if np.isfinite(x)]
+        reached = f"the steps' best was {min(finite):.4g}" if finite else "every step failed"
+        return (
+            f"tuning did not improve on its start (training loss {self.loss0:.4g}; "
+            f"{reached}): the tuned point is the start"
+        )
 
     def to_pandas(self):
         import pandas as pd
@@ -41,8 +65,6 @@ class TuneResult(Result):
 def _function_problem(factory, loss, where):
     """The version-3 functional form `(factory, loss)` as a `FunctionProblem`, with a
     `FutureWarning`."""
-    import warnings
-
     warnings.warn(
         f"`{where}(factory, params0, loss, keys)` is deprecated: pass "
         f"`{where}(FunctionProblem(factory, lambda s: {{'loss': loss(s)}}, metric='loss'), "
@@ -170,7 +192,8 @@ def tune(
     - `mode`: `"forward"` or `"reverse"` differentiation (see `objective`).
     - `study`: a `Study`; its `progress` shows a progress bar over the optax steps.
 
-    **Returns:** a `TuneResult`.
+    **Returns:** a `TuneResult`: the best point met, which is the start when no step
+    improved on it (`TuneResult.improved` is then `False`, and a `UserWarning` says so).
     """
     import optax
     import optimistix as optx
@@ -222,12 +245,21 @@ def tune(
         z_end = sol.value
         end = float(value(z_end))
         history = [
-            {"step": 0, "loss": loss0, **_flat(as_params(z0))},
-            {"step": int(sol.stats["num_steps"]), "loss": end, **_flat(as_params(z_end))},
+            {"step": 0, "loss": loss0, **_flat(as_params(z0), problem.columns)},
+            {
+                "step": int(sol.stats["num_steps"]),
+                "loss": end,
+                **_flat(as_params(z_end), problem.columns),
+            },
         ]
         converged = bool(sol.result == optx.RESULTS.successful)
-        best_z, best_loss = (z_end, end) if end < loss0 else (z0, loss0)
-        return TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, converged)
+        best_z, best_loss, best_i = (z_end, end, 1) if end < loss0 else (z0, loss0, 0)
+        return _finished(
+            TuneResult(
+                as_params(best_z), best_loss, as_params(z0), loss0, history, converged,
+                history[best_i]["step"],
+            )
+        )  # fmt: skip
     opt = optax.adam(0.1) if optimiser is None else optimiser
     with jax.numpy_dtype_promotion("standard"):
         state = opt.init(z0)
@@ -248,7 +280,7 @@ def tune(
     # steps + 1 evaluations of one compiled step: the loss at z_0 ... z_steps (the last
     # update is not taken)
     history, z = [], z0
-    best_z, best_loss, loss0 = z0, np.inf, np.nan
+    best_z, best_loss, loss0, best_i = z0, np.inf, np.nan, 0
     for i in tqdm(range(steps + 1), desc="tune", unit="step", disable=not study.progress):
         value, z_next, state_next = step(z, state)
         value = float(value)
@@ -256,11 +288,21 @@ def tune(
             if not np.isfinite(value):
                 raise ValueError(not_finite)
             loss0 = value
-        history.append({"step": i, "loss": value, **_flat(as_params(z))})
+        history.append({"step": i, "loss": value, **_flat(as_params(z), problem.columns)})
         if np.isfinite(value) and value < best_loss:
-            best_z, best_loss = z, value
+            best_z, best_loss, best_i = z, value, i
         z, state = z_next, state_next
-    return TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, True)
+    return _finished(
+        TuneResult(as_params(best_z), best_loss, as_params(z0), loss0, history, True, best_i)
+    )
+
+
+def _finished(result: TuneResult) -> TuneResult:
+    """`result`, with a `UserWarning` when the tuning ended where it started."""
+    line = result.not_improved_line()
+    if line is not None:
+        warnings.warn(f"tune: {line}.", UserWarning, stacklevel=3)
+    return result
 
 
 def _problem_loss(problem, method, fixed):
@@ -281,12 +323,14 @@ def _to_py(x):
     return float(x) if x.ndim == 0 else x.tolist()
 
 
-def _flat(params: dict) -> dict:
+def _flat(params: dict, columns=None) -> dict:
+    """A point as table columns: a vector parameter one column per component (named by
+    the problem's `columns`, else `name_i`)."""
     out = {}
     for k, v in params.items():
         if isinstance(v, list):
-            for i, vi in enumerate(np.ravel(v)):
-                out[f"{k}[{i}]"] = float(vi)
+            names = component_names(k, np.shape(v), (columns or {}).get(k))
+            out.update(zip(names, map(float, np.ravel(v)), strict=True))
         else:
             out[k] = v
     return out

@@ -45,6 +45,7 @@ from .._reproduction import (
     write_report,
 )
 from ._problem import (
+    AXES as AXES,
     ROBUST_GATE as ROBUST_GATE,
     ROBUST_SCALE_PX as ROBUST_SCALE_PX,
     VelocityProblem as VelocityProblem,
@@ -154,7 +155,7 @@ def noise_study(
     problem = velocity_problem(duration=duration, rate_hz=rate_hz)
     levels = np.asarray(noise_levels, float)
     table = sweep(problem, {"noise_px": levels}, np.arange(seeds), fixed={"K": K, "rho": rho})
-    columns = [f"rms[{i}]" for i in range(6)]
+    columns = [f"rms_{a}" for a in AXES]
     return {
         float(s): table.loc[table["point"] == i, columns].to_numpy() for i, s in enumerate(levels)
     }

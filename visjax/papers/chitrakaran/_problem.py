@@ -70,6 +70,12 @@ def velocity_observer_bandwidth_hz(K) -> list[float]:
     return out
 
 
+AXES = ("v_x", "v_y", "v_z", "omega_x", "omega_y", "omega_z")
+"""The six degrees of freedom of $v = [v_e^T, \\omega_e^T]^T$ (section 5.1), as the
+tables name them."""
+_UNITS6 = ("m/s",) * 3 + ("rad/s",) * 3
+
+
 @final
 class VelocityProblem(AbstractProblem):
     """The velocity of a moving planar object from a fixed camera's pixels (Chitrakaran et
@@ -111,6 +117,16 @@ class VelocityProblem(AbstractProblem):
     trivial_label = "zero velocity"
     data_parameters = ("noise_px",)
     grid = "K_scale=1e-3:1e1:9,rho_scale=1e-3:1e1:9"
+    columns = {
+        "rms": tuple(f"rms_{a}" for a in AXES), "rms_std": tuple(f"rms_std_{a}" for a in AXES),
+        "v_hat": AXES, "v_object": tuple(f"{a}_object" for a in AXES),
+        "K": tuple(f"K_{a}" for a in AXES), "rho": tuple(f"rho_{a}" for a in AXES),
+    }  # fmt: skip
+    units = {
+        "rms_worst": "m/s or rad/s (the worst axis)", "K": "1/s", "rho": "-",
+        **{f"{p}{a}": u for a, u in zip(AXES, _UNITS6) for p in ("rms_", "rms_std_", "")},
+        **{f"{a}_object": u for a, u in zip(AXES, _UNITS6)},
+    }  # fmt: skip
     structural_parameters = ("bandwidth_scale",)
     own_parameters = {
         "estimator": ("K", "rho", "K_scale", "rho_scale"),
@@ -365,6 +381,12 @@ class VelocityProblem(AbstractProblem):
         return velocity_innovation(
             stream, solution, est, t_start=t0 + a, t_end=t0 + b + 1e-9, step=self.dt
         )
+
+    def truth_outputs(self, method, solution):
+        """`v_hat`: the true velocity held at the solution's times (none without one)."""
+        if self.truth is None or not hasattr(solution.outputs, "v_hat"):
+            return {}
+        return {"v_hat": held(self.ts, self.truth, solution.ts)}
 
     def uncertainty(self, method, solution):
         """`rms_std` (6,): per degree of freedom, the fit's predicted standard deviation of

@@ -87,6 +87,11 @@ class HomographyProblem(AbstractProblem):
     label: ClassVar[str] = "RMS of |H_hat H^-1 - I| over the second half (-)"
     trivial_label: ClassVar[str] = "the identity (the reference image's homography)"
     grid: ClassVar[str] = "k_P=3:200:5"
+    columns: ClassVar[dict] = {
+        "H": lambda shape: [f"H_{i + 1}{j + 1}" for i in range(3) for j in range(3)],
+        "A": lambda shape: [f"A_{i + 1}{j + 1}" for i in range(3) for j in range(3)],
+    }  # fmt: skip
+    units: ClassVar[dict] = {"error": "-", "final_error": "-", "H": "-", "A": "-"}
     own_parameters: ClassVar[dict] = {
         "estimator": ("k_P",), "gyro": ("k_P", "k_I"), "dlt": (), "ransac": ("ransac_px",)
     }  # fmt: skip
@@ -175,6 +180,13 @@ class HomographyProblem(AbstractProblem):
         H = jax.vmap(_to_observer_convention, in_axes=(0, None))(G, sc.K)
         return FrameHomographies(ts=sc.ts, H=H, result=result)
 
+    def truth_outputs(self, method, solution):
+        """`H`: the true homography at the solution's times (the scene's samples)."""
+        outputs = getattr(solution, "outputs", None)
+        if not hasattr(outputs, "H") or outputs.H.shape != self.scene.H.shape:
+            return {}
+        return {"H": self.scene.H}
+
     def metrics(self, method, solution):
         H = solution.outputs.H if method in ("estimator", "gyro") else solution.H
         err = homography_error(H, self.scene.H)
@@ -212,8 +224,8 @@ class HomographyProblem(AbstractProblem):
         err = np.asarray(homography_error(H, self.scene.H))
         fig, ax = plt.subplots(figsize=(6, 3.5))
         ax.semilogy(np.asarray(self.scene.ts), err, lw=0.8)
-        ax.set_xlabel("t (s)")
-        ax.set_ylabel(r"$\|\hat H H^{-1} - I\|_F$")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(r"$\|\hat H H^{-1} - I\|_F$ [-]")
         ax.set_title(f"{self.title}: {method}, {number_text(self.noise_px)} px")
         fig.tight_layout()
         return fig
@@ -260,6 +272,14 @@ class VelocityFrontEndProblem(AbstractProblem):
     @property
     def label(self):
         return self.base.label
+
+    @property
+    def columns(self):
+        return self.base.columns
+
+    @property
+    def units(self):
+        return self.base.units
 
     @property
     def title(self):

@@ -59,6 +59,15 @@ class MovingPointProblem(AbstractProblem):
     trivial_label = "the initial depth guess"
     data_parameters = ("noise_px",)
     grid = "K_scale=0.1:10:7,Y_scale=0.1:10:7"
+    columns = {
+        "rms": ("rms_X", "rms_Y", "rms_Z"), "position": ("X", "Y", "Z"),
+        "x_hat": ("x1_hat", "x2_hat", "x3_hat"),
+    }  # fmt: skip
+    units = {
+        "rms": "m", "rms_worst": "m",
+        "position": "the observer's unit: cm on a thesis set (`to_m` 0.01), else m",
+        "x_hat": "x1 = X/Z, x2 = Y/Z (-); x3 = 1/Z (1/the observer's unit)",
+    }  # fmt: skip
     structural_parameters = ("window_frames",)
     own_parameters = {
         "estimator": ("K", "Y", "K_scale", "Y_scale"),
@@ -94,6 +103,13 @@ class MovingPointProblem(AbstractProblem):
     @property
     def scored(self) -> bool:
         return self.truth is not None
+
+    def truth_outputs(self, method, solution):
+        """`position`: the true position held at the solution's times, in the observer's
+        units as the estimate (none without a truth)."""
+        if self.truth is None or not hasattr(solution.outputs, "position"):
+            return {}
+        return {"position": held(self.truth_ts, self.truth, solution.ts)}
 
     def parameters(self) -> dict[str, Parameter]:
         q = self._q_velocity()
@@ -297,12 +313,48 @@ class MovingPointProblem(AbstractProblem):
 
         ts = solution.ts
         truth = None if self.truth is None else held(self.truth_ts, self.truth, ts) * self.to_m
+        estimate = np.asarray(solution.outputs.position) * self.to_m
+        velocities = held(self.frame_ts, self.frame_velocities, ts)
+        D = np.asarray(self.observer.D)[:, 0] if self.moving else None
+        weak = weak_parallax(estimate if truth is None else truth, velocities, D)
         return plot_moving_point(
             np.asarray(ts),
             None if truth is None else np.asarray(truth),
-            np.asarray(solution.outputs.position) * self.to_m,
+            estimate,
+            weak=weak,
             title=f"{self.title}: {method}",
         )
+
+
+WEAK_PARALLAX = 0.1
+"""`weak_parallax`'s threshold: a fraction of the run's median parallax (an assumption of
+visjax's, for figures; the thesis states no observability threshold)."""
+
+
+def weak_parallax(position, velocities, D=None, fraction: float = WEAK_PARALLAX) -> np.ndarray:
+    """Where the depth of the point is weakly observable from the camera's motion: the
+    parallax the camera's translation induces in the normalised coordinates, per unit
+    inverse depth, $w = [v_{cx} - x_1 v_{cz}, v_{cy} - x_2 v_{cz}]$ (the $x_3$ terms of
+    eq. (2.11)), below `fraction` of its median over the run. For a moving point,
+    the part of $w$ along the unknown input's direction in $(x_1, x_2)$ (`D`, eq. (2.11):
+    the point's own velocity there is not known, so that parallax does not separate the
+    depth from it) is left out: in set II.3 the depth rests on $v_{cy}$ alone, and the
+    error grows where $v_{cy}$ crosses zero.
+
+    **Arguments:** `position` (N, 3), the point in the camera frame; `velocities` (N, 6),
+    the camera's $[v_c, \\omega]$ (any length unit: only ratios matter); `D` (3,) or
+    `None` (a static point); `fraction`. **Returns:** (N,) bool (NumPy; for figures)."""
+    p = np.asarray(position, float)
+    v = np.asarray(velocities, float)
+    x1, x2 = p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]
+    w = np.stack([v[:, 0] - x1 * v[:, 2], v[:, 1] - x2 * v[:, 2]], axis=-1)
+    if D is not None and np.linalg.norm(np.asarray(D, float)[:2]) > 0:
+        d = np.asarray(D, float)[:2] / np.linalg.norm(np.asarray(D, float)[:2])
+        w = w - (w @ d)[:, None] * d
+    q = np.linalg.norm(w, axis=-1)
+    if not np.isfinite(q).any():
+        return np.zeros(q.shape, bool)
+    return q < fraction * np.nanmedian(q)
 
 
 def moving_point_problem(

@@ -92,6 +92,14 @@ class StaticPointsProblem(AbstractProblem):
     trivial_label = "the initial guess"
     data_parameters = ("noise_px",)
     grid = "alpha_scale=0.1:10:5,gamma_scale=0.1:10:5"
+    columns = {  # each unknown feature i's estimated world position: X_i, Y_i, Z_i
+        "omega_s": lambda shape: [f"{c}_{i}" for i in range(shape[0]) for c in "XYZ"],
+        "A": lambda shape: [f"A_{i + 1}{j + 1}" for i in range(3) for j in range(3)],
+        "R_c": lambda shape: [f"R_c_{i + 1}{j + 1}" for i in range(3) for j in range(3)],
+    }  # fmt: skip
+    units = {
+        "error": "m", "error_worst": "m", "omega_s": "m", "x_c": "m", "A": "px", "R_c": "-",
+    }  # fmt: skip
     structural_parameters = ("window_frames",)
     own_parameters = {
         "estimator": ("alpha_scale", "gamma_scale"),
@@ -226,6 +234,13 @@ class StaticPointsProblem(AbstractProblem):
             getattr(sol, "diagnostics", None) if outputs else None,
             std,
         )
+
+    def truth_outputs(self, method, solution):
+        """`omega_s`: the unknown features' true world positions (static)."""
+        outputs = getattr(solution, "outputs", None)
+        if self.truth is None or not hasattr(outputs, "omega_s"):
+            return {}
+        return {"omega_s": self.truth}
 
     def metrics(self, method, solution):
         if self.truth is None:

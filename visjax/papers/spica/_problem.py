@@ -92,6 +92,10 @@ class PointDepthProblem(AbstractProblem):
     trivial_label: ClassVar[str] = "the initial depth guess"
     label: ClassVar[str] = "worst relative depth error at the end (-)"
     grid: ClassVar[str] = "alpha=100:3000:5"
+    units: ClassVar[dict] = {
+        "depth_error": "-", "time_to_5pct": "s", "depth": "m", "chi_hat": "1/m",
+        "point": "m", "z": "m", "chi": "1/m",
+    }  # fmt: skip
     structural_parameters: ClassVar[tuple[str, ...]] = ("window",)
     own_parameters: ClassVar[dict] = {
         "estimator": ("alpha", "h", "chi0"),
@@ -235,6 +239,15 @@ class PointDepthProblem(AbstractProblem):
             depth_std=std,
         )
 
+    def truth_outputs(self, method, solution):
+        """`depth`: each point's true depth at the solution's times (the scene's samples;
+        none where the solution saved others)."""
+        outputs = getattr(solution, "outputs", None)
+        truth = self._truth()
+        if not hasattr(outputs, "depth") or outputs.depth.shape != truth.shape:
+            return {}
+        return {"depth": truth}
+
     def _truth(self):
         P = self.scene.points
         return P[..., 2] if self.projection == "planar" else jnp.linalg.norm(P, axis=-1)
@@ -295,9 +308,9 @@ class PointDepthProblem(AbstractProblem):
         for i in range(err.shape[1]):
             z = float(np.asarray(self._truth())[0, i])
             ax.semilogy(ts, err[:, i], lw=0.8, label=f"point {i + 1} ({z:.1f} m)")
-        ax.axhline(0.05, color="k", lw=0.6, ls="--")
-        ax.set_xlabel("t (s)")
-        ax.set_ylabel("relative depth error")
+        ax.axhline(0.05, color="k", lw=0.6, ls="--", label="5%")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("relative depth error [-]")
         ax.set_title(f"{self.title}: {method}, {self.projection}, {number_text(self.noise_px)} px")
         ax.legend(fontsize=7)
         fig.tight_layout()
