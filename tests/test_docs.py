@@ -45,7 +45,7 @@ pytestmark = pytest.mark.skipif(
 def site(tmp_path_factory):
     """The site, built once for this module: `(site directory, build seconds)`."""
     out = tmp_path_factory.mktemp("site")
-    env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
+    env = dict(os.environ, NO_MKDOCS_2_WARNING="1", VISJAX_NB_SHORT="1")  # notebooks: short
     start = time.perf_counter()
     proc = subprocess.run(
         [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
@@ -125,6 +125,20 @@ def test_site_builds_strict_with_every_public_name(site):
     missing = [c for c in codes if f"visjax.RESULTS.{c}" not in anchors]
     assert not missing, f"result codes without an entry in the API reference: {missing}"
 
+    # the notebooks, executed by the build, rendered with their figures
+    for notebook in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        page = (out / "notebooks" / notebook.stem / "index.html").read_text()
+        assert page.count("data:image/png;base64") >= 1, notebook.name
+        assert "Traceback" not in page, notebook.name
+    # the equations need no network: MathJax is served with the site, no page loads a CDN
+    assert (out / "_static" / "mathjax" / "MathJax.js").is_file()
+    assert (out / "_static" / "mathjax" / "config" / "TeX-AMS-MML_HTMLorMML-full.js").is_file()
+    mathjax_url = re.compile(r"""https?://[^"' ]*mathjax""", re.I)
+    for page in out.rglob("*.html"):
+        assert not mathjax_url.search(page.read_text()), page
+    # long code lines scroll inside their block, never cut
+    assert "white-space: pre" in (out / "_static" / "extra.css").read_text()
+
 
 def _code_blocks(language: str):
     for page in sorted(DOCS.rglob("*.md")):
@@ -191,3 +205,29 @@ def test_changelog_citation_and_license_agree_with_the_package():
     assert "Apache License" in license_text and "Version 2.0, January 2004" in license_text
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert project["license"]["text"] == cff["license"] == "Apache-2.0"
+
+
+def test_tables_page_names_every_problems_columns_and_units():
+    """docs/tables.md documents each founding and landmark problem's named columns (each
+    field of its `columns`, the first component's name) and every key of its `units`."""
+    from visjax.papers.chitrakaran import VelocityProblem
+    from visjax.papers.hamel import HomographyProblem
+    from visjax.papers.jang import MovingPointProblem
+    from visjax.papers.nath import StaticPointsProblem
+    from visjax.papers.spica import PointDepthProblem
+
+    page = (DOCS / "tables.md").read_text()
+    for cls in (
+        VelocityProblem, MovingPointProblem, StaticPointsProblem, PointDepthProblem,
+        HomographyProblem,
+    ):  # fmt: skip
+        assert cls.units, cls.__name__
+        for field, names in cls.columns.items():
+            assert f"`{field}`" in page, (cls.__name__, field)
+            if isinstance(names, tuple):  # the first component named, the rest by pattern
+                assert f"`{names[0]}`" in page, (cls.__name__, names[0])
+        components = {
+            n for names in cls.columns.values() if isinstance(names, tuple) for n in names
+        }
+        for key in set(cls.units) - components:
+            assert f"`{key}`" in page, (cls.__name__, key)

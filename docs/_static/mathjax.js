@@ -1,19 +1,21 @@
+// MathJax 2.7, served with the site (_static/mathjax/, copied by docs/_hooks/site_assets.py):
+// the pages' equations render offline. Only the spans pymdownx.arithmatex marks are typeset.
 window.MathJax = {
-  tex: {
+  tex2jax: {
     inlineMath: [["\\(", "\\)"]],
     displayMath: [["\\[", "\\]"]],
     processEscapes: true,
     processEnvironments: true,
+    ignoreClass: ".*",
+    processClass: "arithmatex",
   },
-  options: {
-    ignoreHtmlClass: ".*|",
-    processHtmlClass: "arithmatex",
-  },
+  TeX: { extensions: ["AMSmath.js", "AMSsymbols.js"] },
+  messageStyle: "none",
+  showMathMenu: false,
 };
 
 document$.subscribe(() => {
-  MathJax.startup.output.clearCache();
-  MathJax.typesetClear();
-  MathJax.texReset();
-  MathJax.typesetPromise();
+  if (window.MathJax && window.MathJax.Hub) {
+    window.MathJax.Hub.Queue(["Typeset", window.MathJax.Hub]);
+  }
 });
