@@ -12,7 +12,7 @@ from tests.helpers import check_outputs, check_testbed_tracking, twin_kinematics
 from visjax import _options
 from visjax.cli import build_parser, main
 from visjax.io import read_summary
-from visjax.papers.chitrakaran import K_EQ63
+from visjax.papers.chitrakaran import AXES, K_EQ63
 
 
 def _summary(folder) -> dict:
@@ -328,10 +328,10 @@ def test_read_only_out_is_refused_before_any_work(capsys, tmp_path, monkeypatch)
     locked.chmod(0o755)
 
 
-def _estimates(folder, name, size):
-    """The columns `name[0]` ... `name[size-1]` of a `run`'s `estimates.parquet`."""
+def _estimates(folder, columns):
+    """The named columns of a `run`'s `estimates.parquet` (one column per number)."""
     table = pd.read_parquet(Path(folder) / "estimates.parquet")
-    return table["t"].to_numpy(), table[[f"{name}[{i}]" for i in range(size)]].to_numpy()
+    return table["t"].to_numpy(), table[list(columns)].to_numpy()
 
 
 @pytest.mark.slow
@@ -364,11 +364,11 @@ def test_a_slow_file_gives_one_estimate_by_every_route(tmp_path, capsys):
     step = _summary(old)["problem_settings"]["integration_step_s"]
     assert 0 < step < 0.02 / 2  # a held step, half the bound at most
     assert _summary(new)["problem_settings"]["integration_step_s"] == step
-    t, v_hat = _estimates(old, "v_hat", 6)
-    t_new, v_new = _estimates(new, "v_hat", 6)
+    t, v_hat = _estimates(old, AXES)
+    t_new, v_new = _estimates(new, AXES)
     np.testing.assert_array_equal(t_new, t)
     np.testing.assert_array_equal(v_new, v_hat)
-    t_low, v_low = _estimates(low, "v_hat", 6)
+    t_low, v_low = _estimates(low, AXES)
     np.testing.assert_array_equal(t_low, t)
     np.testing.assert_allclose(v_low, np.asarray(lowpass(t, v_hat, 2.0)), rtol=0, atol=1e-12)
     settings = _summary(low)["problem_settings"]
@@ -393,7 +393,7 @@ def test_velocity_on_a_data_file(tmp_path, capsys):
     np.testing.assert_allclose(window, [0.4995, 0.999], rtol=1e-6)
     rms = summary["metrics"]["rms"]
     assert len(rms) == 6 and max(rms) < 0.05  # noise-free, 0.5-1 s: converging
-    t, v_hat = _estimates(out, "v_hat", 6)
+    t, v_hat = _estimates(out, AXES)
     assert v_hat.shape == (1000, 6) and t[0] == 0.0
     quality = summary["quality"]  # against zero velocity over the same window
     assert quality["flag"] == "ok" and quality["ratio_to_trivial"] < 0.5, quality
@@ -449,7 +449,7 @@ def test_moving_and_static_points_on_data_files(tmp_path, capsys):
     errors = np.asarray(summary["metrics"]["error"])
     # 10 s of a 40 s convergence: from 0.1-0.5 m to a few cm, each at least halved
     table = pd.read_parquet(out / "estimates.parquet")
-    start = np.array([[table[f"omega_s[{i},{j}]"][0] for j in range(3)] for i in range(5)])
+    start = np.array([[table[f"{c}_{i}"][0] for c in "XYZ"] for i in range(5)])
     initial = np.linalg.norm(start - np.load(path)["features"], axis=-1)
     assert len(errors) == 5 and errors.max() < 0.1 and np.all(errors < 0.5 * initial)
     assert "error_worst" in capsys.readouterr().out
