@@ -160,8 +160,8 @@ def test_an_unknown_grid_axis_is_refused_naming_the_valid_ones(no_study, capsys)
     [
         (["velocty"], "'velocity'"),  # a command
         (["run", "velocty"], "'velocity'"),  # a problem
-        (["run", "velocity", "--method", "estimatr"], "'estimator'"),
-        (["compare", "velocity", "--methods", "estimator,ekff"], "'ekf'"),
+        ([*TOY, "run", "slow-toy", "--method", "estimatr"], "'estimator'"),  # a method
+        ([*TOY, "compare", "slow-toy", "--methods", "estimatr"], "'estimator'"),
         (["run", "moving_point", "--set", "II_2"], "'II.2'"),  # a variant
         (["testbed", "--set", "II_2"], "'II.2'"),
         (["run", "velocity", "--dtype", "float23"], "'float32'"),  # an option's value
