@@ -2,6 +2,7 @@
 the testbed's checks."""
 
 import json
+import re
 
 import jax
 import numpy as np
@@ -186,3 +187,54 @@ def innovation_ratios(problem, key, parameter: str, values, method: str = "estim
         sol = problem.solve(method, params, inputs, outputs=True)
         out[value] = float(problem.innovation(method, params, sol, inputs).ratio)
     return out
+
+
+def outside_canvas(fig, renderer=None) -> list[str]:
+    """What of a figure reaches outside its canvas (one pixel of tolerance), which a
+    saved file would clip: the drawn artists' tight box (ticks beyond the view limits are
+    not drawn), per axes (named by its labels), figure legend and figure text."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = renderer or FigureCanvasAgg(fig).get_renderer()
+    fig.draw(renderer)
+    box = fig.bbox
+
+    def out(e):
+        return e.x0 < box.x0 - 1 or e.y0 < box.y0 - 1 or e.x1 > box.x1 + 1 or e.y1 > box.y1 + 1
+
+    found = [
+        f"axes {ax.get_ylabel() or ax.get_title()!r}"
+        for ax in fig.axes
+        if ax.get_visible() and out(ax.get_tightbbox(renderer))
+    ]
+    found += [f"legend {lg.get_texts()[0].get_text()!r}..." for lg in fig.legends
+              if out(lg.get_window_extent(renderer))]  # fmt: skip
+    texts = [t for t in fig.texts if t.get_visible() and t.get_text()]
+    found += [f"text {t.get_text()!r}" for t in texts if out(t.get_window_extent(renderer))]
+    return found
+
+
+UNIT_LABEL = re.compile(r"\[[^\]]+\]")
+
+
+def figure_faults(fig) -> list[str]:
+    """What a reader of a saved figure would miss: whatever reaches off the canvas
+    (`outside_canvas`), and an axes drawing data (lines of more than two points,
+    collections, images) with no unit in brackets on its y label, or on its x label
+    (its own, or that of an axes sharing its x axis; categorical axes, with text ticks,
+    exempt)."""
+    found = outside_canvas(fig)
+    for ax in fig.axes:
+        lines = [ln for ln in ax.get_lines() if np.size(ln.get_xdata()) > 2]
+        if not ax.get_visible() or not (lines or ax.collections or ax.images):
+            continue
+        name = ax.get_title() or ax.get_ylabel() or "an axes"
+        if not UNIT_LABEL.search(ax.get_ylabel()):
+            found.append(f"{name!r}: y label {ax.get_ylabel()!r} without a unit")
+        ticks = [t.get_text() for t in ax.get_xticklabels()]
+        if any(re.search("[A-Za-z]", s) and not s.startswith("$") for s in ticks):
+            continue
+        shared = [a.get_xlabel() for a in ax.get_shared_x_axes().get_siblings(ax)]
+        if not any(UNIT_LABEL.search(s) for s in shared):
+            found.append(f"{name!r}: x label {ax.get_xlabel()!r} without a unit")
+    return found

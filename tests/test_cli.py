@@ -8,8 +8,13 @@ import pandas as pd
 import pytest
 
 import visjax
-from tests.helpers import check_outputs, check_testbed_tracking, twin_kinematics_residual
-from visjax import _options
+from tests.helpers import (
+    check_outputs,
+    check_testbed_tracking,
+    figure_faults,
+    twin_kinematics_residual,
+)
+from visjax import _options, studies
 from visjax.cli import build_parser, main
 from visjax.io import read_summary
 from visjax.papers.chitrakaran import AXES, K_EQ63
@@ -20,17 +25,38 @@ def _summary(folder) -> dict:
     return read_summary(Path(folder) / "summary.json").to_dict()
 
 
+@pytest.fixture
+def saved_figures(monkeypatch):
+    """Every figure a command saves, checked as it is saved (`figure_faults`: nothing off
+    the canvas, units on the axes): path -> what is wrong (empty when nothing)."""
+    import matplotlib.figure
+
+    checked = {}
+    savefig = matplotlib.figure.Figure.savefig
+
+    def checked_savefig(fig, fname, *args, **kwargs):
+        if str(fname) not in checked:
+            checked[str(fname)] = figure_faults(fig)
+        return savefig(fig, fname, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", checked_savefig)
+    return checked
+
+
 # The commands' end-to-end tests share the small settings of `reproduce`'s smoke test (its
 # jobs are the commands), and stay in this module: `pytest --dist loadfile` runs a module
 # in one worker, so each job is traced and compiled once for all of them.
 TESTBED_S = 4.0
 
 
-def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatch, capsys):
+def test_reproduce_smoke_every_output_loads_with_its_schema(
+    tmp_path, monkeypatch, capsys, saved_figures
+):
     """`visjax reproduce` on the small settings of the commands' tests below (the full
     `--quick` run is a slow test of `tests/test_outputs.py`): every job runs, every output
     follows its schema, and the table has one number per row. Its figures as SVG (a quarter
-    of the time of 300-dpi PNGs; the commands' own tests below write PNGs)."""
+    of the time of 300-dpi PNGs; the commands' own tests below write PNGs), every one with
+    its labels on the canvas and units on its axes."""
     import dataclasses
     import functools
 
@@ -72,6 +98,33 @@ def test_reproduce_smoke_every_output_loads_with_its_schema(tmp_path, monkeypatc
     assert "summary" in capsys.readouterr().out
     figures = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.svg"))
     assert len(figures) == 10 and not list(out.rglob("*.png")), figures
+    assert len(saved_figures) == 10 and not any(saved_figures.values()), saved_figures
+
+
+RUN_FIGURES = {  # every registered problem, on short settings
+    "velocity": ["--duration", "1"],
+    "moving_point": ["--set", "II.3", "--duration", "2"],
+    "static_points": ["--duration", "2"],
+    "point_depth": ["--duration", "2"],
+    "homography": ["--duration", "0.2"],
+}
+
+
+def test_the_run_figures_checked_are_every_registered_problems():
+    assert sorted(RUN_FIGURES) == studies.problem_names()
+
+
+@pytest.mark.slow  # five problems built and compiled (the unit tier's time)
+@pytest.mark.parametrize("problem", sorted(RUN_FIGURES))
+def test_every_problems_run_figure_keeps_its_labels_on_the_canvas(problem, tmp_path, saved_figures):
+    """`visjax run PROBLEM` for every registered problem: its figure (`run.svg`, the
+    problem's own `figure`) has nothing off the canvas and a unit on every axis."""
+    out = tmp_path / problem
+    argv = ["run", problem, *RUN_FIGURES[problem], "--noise", "0.1", "--format", "svg", "--quiet"]
+    assert main([*argv, "--out", str(out)]) in (0, 1)  # 1: a run whose verdict failed
+    [(path, faults)] = saved_figures.items()  # written in a staging folder, then moved
+    assert path.endswith("run.svg") and faults == [], (path, faults)
+    assert len(list(out.rglob("run.svg"))) == 1
 
 
 def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):

@@ -18,6 +18,7 @@ from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.text import Text  # noqa: E402
 from matplotlib.ticker import FixedLocator  # noqa: E402
 
+from tests.helpers import outside_canvas  # noqa: E402
 from visjax import plots, studies  # noqa: E402
 
 N, S = 120, 4
@@ -276,29 +277,6 @@ def _x_label_with_unit(ax):
     return labels[0] if labels else ""
 
 
-def outside_canvas(fig, renderer=None) -> list[str]:
-    """What of a figure reaches outside its canvas (one pixel of tolerance), which a
-    saved file would clip: the drawn artists' tight box (ticks beyond the view limits are
-    not drawn), per axes (named by its labels), figure legend and figure text."""
-    renderer = renderer or FigureCanvasAgg(fig).get_renderer()
-    fig.draw(renderer)
-    box = fig.bbox
-
-    def out(e):
-        return e.x0 < box.x0 - 1 or e.y0 < box.y0 - 1 or e.x1 > box.x1 + 1 or e.y1 > box.y1 + 1
-
-    found = [
-        f"axes {ax.get_ylabel() or ax.get_title()!r}"
-        for ax in fig.axes
-        if ax.get_visible() and out(ax.get_tightbbox(renderer))
-    ]
-    found += [f"legend {lg.get_texts()[0].get_text()!r}..." for lg in fig.legends
-              if out(lg.get_window_extent(renderer))]  # fmt: skip
-    texts = [t for t in fig.texts if t.get_visible() and t.get_text()]
-    found += [f"text {t.get_text()!r}" for t in texts if out(t.get_window_extent(renderer))]
-    return found
-
-
 # the longest of the registered problems' headline labels: the commands' figures carry these
 LABELS = [
     "worst-axis RMS over the window (m/s, rad/s)",
@@ -473,6 +451,35 @@ def test_camera_velocity_linear_first_in_input_angular_on_top():
         plt.close(fig)
     with pytest.raises(ValueError, match="N, 6"):
         plots.plot_camera_velocity(t, v[:, :3])
+
+
+def test_lines_that_coincide_are_drawn_in_interleaved_dashes():
+    """A set of constant velocities has components identically zero: their lines coincide,
+    and each is drawn in dashes offset from the others' (every colour shows); a line of its
+    own stays solid, and the legend keeps solid lines."""
+    t = np.linspace(0.0, 2.0, N)
+    v = np.zeros((N, 6))
+    v[:, 0], v[:, 5] = 0.05, 0.1 * np.sin(t)  # v_cx, omega_cz; the four others are zero
+    v[:, 1] = 1e-9 * np.sin(t)  # within 1e-3 of the range: drawn as coinciding
+    fig = plots.plot_camera_velocity(t, v)
+    try:
+        top, bottom = fig.axes
+        for ax, zero in ((top, [0, 1]), (bottom, [1, 2])):
+            lines = [ln for ln in ax.get_lines() if ln.get_gid() == "velocity"]
+            offsets = []
+            for i, line in enumerate(lines):
+                style = line.get_linestyle()
+                if i in zero:
+                    offset, pattern = line._unscaled_dash_pattern
+                    assert tuple(pattern) == (plots._DASH, plots._DASH), style
+                    offsets.append(offset)
+                else:
+                    assert style == "-"
+            assert sorted(offsets) == [0.0, plots._DASH]
+        legend_lines = [h for ax in fig.axes for h in ax.get_legend().get_lines()]
+        assert {h.get_linestyle() for h in legend_lines} == {"-"}
+    finally:
+        plt.close(fig)
 
 
 def test_geometry_degrees_and_relative_errors_on_separate_axes():

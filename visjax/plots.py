@@ -18,6 +18,9 @@ Conventions, shared by every `plot_*` function:
   the estimate solid, in colour, underneath, so that a noisy estimate never hides the truth.
   Lines carry a `gid` (`"truth"`, `"estimate"`, `"measured"`, `"error"`) for whoever
   post-processes them.
+- **Coinciding lines** (components identically zero, two methods with the same result) are
+  drawn in interleaved dashes of their colours, so that none hides another; the legend
+  keeps each one's own solid line.
 - **Legends** never cover data: one figure legend below the panels (or above a panel, outside
   its axes).
 - **Axes.** Every axis that shows data is labelled with its unit in brackets: `time [s]`,
@@ -172,6 +175,7 @@ def _finish(fig, title, path, formats):
         # a number and its unit stay on one line
         text = re.sub(r"(\d) (?=[^\W\d])", "\\1\u00a0", str(title))
         fig.suptitle(textwrap.fill(text, chars), fontsize=_STYLE["figure.titlesize"])
+    _interleave_coincident(fig)
     for ax in fig.axes:
         # ticks are made at draw time: keep their size when drawn outside the rc_context
         ax.tick_params(labelsize=_STYLE["xtick.labelsize"])
@@ -183,6 +187,48 @@ def _finish(fig, title, path, formats):
             fig.savefig(base.with_suffix("." + fmt), format=fmt, dpi=DPI, metadata=_METADATA[fmt])
         plt.close(fig)
     return fig
+
+
+_DASH = 4.0  # points: one colour's dash in a group of coinciding lines
+
+
+def _interleave_coincident(fig) -> None:
+    """Solid lines of one axes that coincide (the same times, values within 1e-3 of the
+    axes' range at every point) would hide all but the last drawn: each group is redrawn
+    in interleaved dashes, one dash of each colour in turn. The truth (dashed already)
+    and reference lines (two points) are left as they are."""
+    for ax in fig.axes:
+        lines = [
+            ln
+            for ln in ax.get_lines()
+            if ln.get_gid() != "truth" and ln.get_linestyle() == "-" and np.size(ln.get_xdata()) > 2
+        ]
+        if len(lines) < 2:
+            continue
+        data = [(np.asarray(ln.get_xdata(), float), np.asarray(ln.get_ydata(), float))
+                for ln in lines]  # fmt: skip
+        values = np.concatenate([y[np.isfinite(y)] for _, y in data])
+        if values.size == 0:
+            continue
+        tol = 1e-3 * max(float(np.ptp(values)), float(np.max(np.abs(values))), 1e-300)
+        groups: list[list[int]] = []
+        for i, (x, y) in enumerate(data):
+            for group in groups:
+                x0, y0 = data[group[0]]
+                if (
+                    x.shape == x0.shape
+                    and np.array_equal(x, x0)
+                    and y.shape == y0.shape
+                    and np.allclose(y, y0, rtol=0.0, atol=tol, equal_nan=True)
+                ):
+                    group.append(i)
+                    break
+            else:
+                groups.append([i])
+        for group in groups:
+            k = len(group)
+            for j, i in enumerate(group if k > 1 else ()):
+                lines[i].set_linestyle((j * _DASH, (_DASH, (k - 1) * _DASH)))
 
 
 def _fit_label(text, inches: float) -> None:

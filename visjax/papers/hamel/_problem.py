@@ -2,6 +2,7 @@
 Hamel et al. against per-frame homographies) and `velocity_front_end` (the observer as the
 front end of the velocity problem of Chitrakaran et al.)."""
 
+import textwrap
 from typing import Any, ClassVar, final
 
 import equinox as eqx
@@ -226,7 +227,8 @@ class HomographyProblem(AbstractProblem):
         ax.semilogy(np.asarray(self.scene.ts), err, lw=0.8)
         ax.set_xlabel("time [s]")
         ax.set_ylabel(r"$\|\hat H H^{-1} - I\|_F$ [-]")
-        ax.set_title(f"{self.title}: {method}, {number_text(self.noise_px)} px")
+        title = f"{self.title}: {method}, {number_text(self.noise_px)} px"
+        ax.set_title(textwrap.fill(title, 60))  # 12 pt: about 10 characters an inch
         fig.tight_layout()
         return fig
 

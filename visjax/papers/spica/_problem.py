@@ -2,6 +2,7 @@
 depth of static points seen by a camera moving with a known velocity, every method on one
 scene of its own."""
 
+import textwrap
 from typing import Any, ClassVar, Literal, final
 
 import equinox as eqx
@@ -311,7 +312,8 @@ class PointDepthProblem(AbstractProblem):
         ax.axhline(0.05, color="k", lw=0.6, ls="--", label="5%")
         ax.set_xlabel("time [s]")
         ax.set_ylabel("relative depth error [-]")
-        ax.set_title(f"{self.title}: {method}, {self.projection}, {number_text(self.noise_px)} px")
+        title = f"{self.title}: {method}, {self.projection}, {number_text(self.noise_px)} px"
+        ax.set_title(textwrap.fill(title, 70))  # 12 pt: about 10 characters an inch
         ax.legend(fontsize=7)
         fig.tight_layout()
         return fig
