@@ -2,6 +2,7 @@
 has its entry in the API reference, and the pages' code names only what exists."""
 
 import ast
+import base64
 import importlib
 import importlib.util
 import os
@@ -32,9 +33,33 @@ PACKAGES = (
     "frontend",
     "io",
     "studies",
+    "plots",
 )
 # the papers' modules, documented member by member
 PAPERS = ("chitrakaran", "jang", "nath", "spica", "hamel")
+
+# page -> the key figure it shows (figures/NAME.png, from the notebook cell tagged figure-NAME)
+KEY_FIGURES = {
+    "papers/velocity": "velocity",
+    "papers/moving_point": "moving-point",
+    "testbed": "testbed",
+    "papers/static_points": "static-points",
+    "papers/point_depth": "point-depth",
+    "papers/homography": "homography",
+    "runner": "runner",
+    "sweeps-and-tuning": "sweep",
+    "your-own-data": "own-data",
+    "baselines": "comparison",
+    "tables": "tables",
+}
+# page -> API entries its prose links to (by docs/_hooks/api_links.py)
+API_LINKS = {
+    "runner": ["visjax.estimators.run", "visjax.estimators.SaveAt"],
+    "sweeps-and-tuning": ["visjax.studies.sweep", "visjax.studies.tune"],
+    "your-own-data": ["visjax.io.data_from_tracks"],
+    "baselines": ["visjax.studies.compare"],
+    "testbed": ["visjax.papers.jang.testbed"],
+}
 
 pytestmark = pytest.mark.skipif(
     not (ROOT / "mkdocs.yml").exists(), reason="no mkdocs.yml (not a source checkout)"
@@ -130,6 +155,27 @@ def test_site_builds_strict_with_every_public_name(site):
         page = (out / "notebooks" / notebook.stem / "index.html").read_text()
         assert page.count("data:image/png;base64") >= 1, notebook.name
         assert "Traceback" not in page, notebook.name
+    # each paper page and guide shows its key figure: the PNG its notebook's tagged cell drew
+    drawn = {
+        base64.b64decode(b)
+        for notebook in (out / "notebooks").glob("*/index.html")
+        for b in re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", notebook.read_text())
+    }
+    for page, name in KEY_FIGURES.items():
+        html = (out / page / "index.html").read_text()
+        assert re.search(rf'<img [^>]*src="(\.\./)+figures/{name}\.png"', html), (page, name)
+        png = (out / "figures" / f"{name}.png").read_bytes()
+        assert png.startswith(b"\x89PNG") and len(png) > 10_000, (name, len(png))
+        assert png in drawn, name
+    # the names a page writes as code link to their API entries, first use on each page
+    for page, names in API_LINKS.items():
+        html = (out / page / "index.html").read_text()
+        for full in names:
+            module = full.rsplit(".", 1)[0].removeprefix("visjax.").split(".")[0]
+            assert re.search(rf'href="(\.\./)+api/{module}/#{re.escape(full)}"', html), (
+                page,
+                full,
+            )
     # the equations need no network: MathJax is served with the site, no page loads a CDN
     assert (out / "_static" / "mathjax" / "MathJax.js").is_file()
     assert (out / "_static" / "mathjax" / "config" / "TeX-AMS-MML_HTMLorMML-full.js").is_file()
