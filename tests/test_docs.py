@@ -51,6 +51,8 @@ KEY_FIGURES = {
     "your-own-data": "own-data",
     "baselines": "comparison",
     "tables": "tables",
+    "geometry": "geometry",
+    "extending": "point-depth",
 }
 # page -> API entries its prose links to (by docs/_hooks/api_links.py)
 API_LINKS = {

@@ -12,10 +12,9 @@ import jax
 import numpy as np
 
 from .._results import RESULTS, result_names
-from ._problem import AbstractProblem, as_json, method_runs
+from ._problem import AbstractProblem, as_json, component_names, method_runs
 from ._stats import bootstrap_interval, paired_comparison
 from ._study import Result, Study, seed_keys, study_of
-from ._sweep import component_names
 from ._verdict import judge_records
 
 
