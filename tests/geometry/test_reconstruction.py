@@ -95,6 +95,7 @@ def test_gradient_matches_finite_differences(scenes):
         )
 
 
+@pytest.mark.slow  # the unit tier's time: 16 s of compiles; the general gradient stays in it
 def test_gradient_at_identity_and_symmetric_square():
     """The paper's start: reference pose (H = I), a symmetric square target, no noise."""
     A = np.array([[1268.16, 0.0, 257.49], [0.0, 1267.50, 253.10], [0.0, 0.0, 1.0]])  # eq. (62)

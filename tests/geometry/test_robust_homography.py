@@ -222,6 +222,7 @@ def test_throw_and_result_codes(scenes):
     assert int(counts[0]) > N // 2 and int(counts[1]) == 0
 
 
+@pytest.mark.slow  # the unit tier's time: 9 s of compiles
 def test_gradient_against_finite_differences(scenes):
     """`jax.grad` through the refinement (the inlier set fixed: it does not change over
     the finite-difference steps) against a central difference along a random direction."""

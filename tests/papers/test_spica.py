@@ -344,6 +344,7 @@ def _final_z(sigma_des):
     return chi - sol.final_state.observer.chi_hat[0]
 
 
+@pytest.mark.slow  # the unit tier's time: 8 s of compiles
 def test_closed_loop_jit_vmap_grad():
     """vmap over two sigma_d (the same as one at a time; the stiffer one converges further),
     and the gradient of the final error with respect to sigma_d against central

@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from visjax.estimators import moving_point_stream
 from visjax.sim import add_pixel_noise, fixed_camera_pixels, integrate_twist, platform_camera_pixels
@@ -18,6 +19,7 @@ def _pixels(a, points):
     return fixed_camera_pixels(body, points, A)
 
 
+@pytest.mark.slow  # the unit tier's time: 9 s of compiles
 def test_fixed_camera_pixels_jit_vmap_grad():
     points = jnp.array([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]])
     f = jax.jit(lambda a: jnp.sum(_pixels(a, points)))
