@@ -20,6 +20,7 @@ from visjax.frontend import (
     track_marker,
     write_video,
 )
+from visjax.geometry import undistort_pixels
 
 SHAPE = (240, 320)
 N_FRAMES = 30
@@ -285,6 +286,27 @@ def test_aruco_detector_finds_the_rendered_marker_corners():
     assert tracks.alive[:, :4].all()  # the corners are tracked through the frames
     err = np.linalg.norm(tracks.pixels - truth_k, axis=-1)
     assert np.nanmax(err[:, :4]) < 0.5
+
+
+def test_a_lens_view_shows_the_marker_where_the_lens_projects_it():
+    """`render_planes(..., dist=)` draws what a camera with that lens sees: ArUco finds the
+    marker's corners where `project_points(..., dist=)` puts them, several pixels from the
+    pinhole's, and `undistort_pixels` brings them back to the pinhole's."""
+    dist = np.array([-0.4, 0.1, 1e-3, -1e-3, 0.0])
+    marker, corners = _marker(7)
+    marker.T_world_plane[:3, 3] = [0.06, 0.04, -0.35]  # off the optical axis, in view
+    world = marker.world_points(corners)
+    R, p = _pose(0)
+    image = render_planes([_table(), marker], K, R, p, SHAPE, supersample=2, dist=dist)
+    ids, found = detect_aruco(image)
+    assert list(ids) == [7]
+    lens = project_points(K, R, p, world, dist=dist)
+    pinhole = project_points(K, R, p, world)
+    moved = np.linalg.norm(lens - pinhole, axis=-1)
+    assert moved.min() > 1.0 and moved.max() > 10.0  # the lens moves every corner
+    assert np.linalg.norm(found[0] - lens, axis=-1).max() < 0.5
+    back = np.asarray(undistort_pixels(found[0], K, dist))
+    assert np.linalg.norm(back - pinhole, axis=-1).max() < 0.5
 
 
 def test_track_marker_follows_refines_and_recovers_the_marker():

@@ -11,6 +11,7 @@ import pytest
 import yaml
 
 from visjax import io
+from visjax.geometry import distort_pixels
 from visjax.io import DataFormatError
 
 K = np.array([[300.0, 0.0, 160.0], [0.0, 300.0, 120.0], [0.0, 0.0, 1.0]])
@@ -73,6 +74,55 @@ def test_velocity_file_from_tracks_and_a_camera_file(tmp_path, suffix):
     np.testing.assert_array_equal(saved.pixels, data.pixels)
 
 
+LENS = np.array([-0.4, 0.1, 0.0, 0.0, 0.0])  # barrel distortion of a wide-angle lens
+
+
+def test_distorted_tracks_choose_the_plane_undistorted_and_load_undistorted(tmp_path):
+    """Through a lens (`dist`; up to 24 px from the pinhole's pixels here): the camera
+    file's `dist` has the plane chosen among the undistorted tracks (those of a pinhole);
+    the data file keeps the tracks as the lens saw them, with `dist`, and `load` gives the
+    pinhole's pixels back."""
+    t, ideal = _plane_tracks()
+    raw = np.asarray(distort_pixels(ideal, K, LENS))
+    assert np.nanmax(np.linalg.norm(raw - ideal, axis=-1)) > 20.0
+    known = [0, 2, 0.2]
+    camera = {"A": K.tolist(), "coplanar": 7, "known_length": known, "dist": LENS.tolist()}
+    data = io.data_from_tracks("velocity", (t, raw), camera)
+    assert sorted(io.choose_coplanar(ideal, 7)) == [0, 2, 3, 4, 5, 6, 7]
+    chosen = io.choose_coplanar(ideal, 7)
+    np.testing.assert_array_equal(data.pixels, raw[:, chosen])
+    np.testing.assert_array_equal(data.dist, LENS)
+    path = data.save(tmp_path / "plate.npz")
+    loaded = io.VelocityData.load(path)
+    assert loaded.dist is None
+    np.testing.assert_allclose(loaded.pixels, ideal[:, chosen], atol=1e-9)
+    kept = io.VelocityData.load(path, undistort=False)
+    np.testing.assert_array_equal(kept.pixels, raw[:, chosen])
+    np.testing.assert_array_equal(kept.dist, LENS)
+
+
+@pytest.mark.parametrize(
+    "dist, says",
+    [
+        (np.zeros(6), "4, 5, 8, 12 or 14 coefficients"),
+        (np.array([np.nan, 0.0, 0.0, 0.0]), "`dist` must be finite"),
+        # k1 = -1.2 maps no point beyond 0.35 (normalized): 105 px from the centre here
+        (np.array([-1.2, 0.0, 0.0, 0.0]), "where the lens model `dist` maps no point"),
+    ],
+)
+def test_a_file_with_bad_coefficients_is_refused_naming_them(tmp_path, dist, says):
+    t, ideal = _plane_tracks()
+    pixels = ideal[:, [0, 2, 3, 4]]
+    pixels[:, 3] = [[160.0 + 110.0, 120.0]] * len(t)  # 110 px from the principal point
+    data = io.VelocityData(
+        t=t, pixels=pixels, A=K, R_star=np.eye(3), s1=np.zeros(3),
+        known_length=np.array([0, 1, 0.2]), dist=dist,
+    )  # fmt: skip
+    np.savez(tmp_path / "plate.npz", **{k: v for k, v in vars(data).items() if v is not None})
+    with pytest.raises(DataFormatError, match=says.replace("`", ".")):
+        io.VelocityData.load(tmp_path / "plate.npz")
+
+
 def test_moving_point_and_static_points_files(tmp_path):
     """The moving point's file takes one track and the camera's velocity from a CSV
     (relative to the camera file); the static points' file the known and unknown tracks,
@@ -119,6 +169,8 @@ def test_moving_point_and_static_points_files(tmp_path):
         ("moving_point", {"A": K.tolist(), "camera_velocity": "v.csv"}, "no `feature`"),
         ("static_points", {"A": K.tolist(), "known": []}, "non-empty list"),
         ("tracking", {"A": K.tolist()}, "no data file for problem 'tracking'"),
+        ("velocity", {"A": K.tolist(), "coplanar": 5, "dist": [0.1, 0.2]}, "4, 5, 8, 12 or 14"),
+        ("velocity", {"A": K.tolist(), "coplanar": 5, "dist": "barrel"}, "4, 5, 8, 12 or 14"),
     ],
 )
 def test_each_bad_camera_entry_is_one_error_naming_it(problem, camera, says):

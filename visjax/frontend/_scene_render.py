@@ -15,11 +15,18 @@ Convention (every function here):
   plane's origin, its rows run along the plane's $y$ and its columns along $x$.
   Texture coordinates $(x_t, y_t)$ follow the image convention (pixel centres at integers),
   so the plane point is $(x, y) = s\\,(x_t + 0.5, y_t + 0.5)$.
+- Lens: `dist` (optional), OpenCV's distortion coefficients (`visjax.geometry.distort_pixels`):
+  the view and the projected points are those of a camera with that lens; without it, of
+  a pinhole camera.
 """
 
+import functools
 from dataclasses import dataclass
 
+import jax
 import numpy as np
+
+from ..geometry import distort_pixels, undistort_pixels
 
 
 def _pose(T, name):
@@ -98,11 +105,11 @@ class Plane:
         return (local @ self.T_world_plane.T)[:, :3]
 
 
-def project_points(K, R_world_cam, p_world_cam, points) -> np.ndarray:
-    """Pixels of world points seen by a pinhole camera.
+def project_points(K, R_world_cam, p_world_cam, points, *, dist=None) -> np.ndarray:
+    """Pixels of world points seen by a pinhole camera (with `dist`, through that lens).
 
     **Arguments:** `K` (3, 3); `R_world_cam` (3, 3); `p_world_cam` (3,); `points` (n, 3)
-    world points.
+    world points; `dist` OpenCV's distortion coefficients, or `None` (a pinhole).
 
     **Returns:** (n, 2) pixels $(u, v)$; NaN for a point on or behind the camera's plane
     ($z \\le 0$ in the camera frame).
@@ -119,6 +126,9 @@ def project_points(K, R_world_cam, p_world_cam, points) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = m[:, :2] / m[:, 2:]
     uv[cam[:, 2] <= 0] = np.nan
+    if dist is not None:
+        with jax.enable_x64(True):
+            uv = np.asarray(distort_pixels(uv, K, np.asarray(dist, float)))
     return uv
 
 
@@ -155,6 +165,7 @@ def render_planes(
     *,
     background=0.0,
     supersample: int = 4,
+    dist=None,
 ) -> np.ndarray:
     """Render a camera view of textured planes, composited in order (later on top).
 
@@ -169,6 +180,10 @@ def render_planes(
       `cv2.INTER_AREA`: the anti-aliasing (a box filter over `supersample`$^2$ samples).
       The texture itself is not prefiltered, so a texture much finer than a supersampled
       pixel still aliases: keep textures smooth at the scale they are seen.
+    - `dist`: OpenCV's distortion coefficients of the lens, or `None` (a pinhole): the
+      pinhole view is rendered, then each supersampled pixel of the lens' view takes the
+      pinhole view's value where `visjax.geometry.undistort_pixels` sends it (bilinear);
+      a pixel the lens model cannot have produced shows `background`.
 
     **Returns:** (H, W) uint8 image.
 
@@ -219,8 +234,29 @@ def render_planes(
             front = (c > 0).astype(np.float32)
             value, cover = value * front, cover * front
         out = out * (1.0 - cover) + value
+    if dist is not None:
+        map_u, map_v = _lens_map(K.tobytes(), np.asarray(dist, float).tobytes(), h, w, f)
+        out = cv2.remap(
+            out, map_u, map_v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+            borderValue=float(background),
+        )  # fmt: skip
     low = cv2.resize(out, (w, h), interpolation=cv2.INTER_AREA) if f > 1 else out
     return np.clip(np.rint(low), 0, 255).astype(np.uint8)
+
+
+@functools.lru_cache(maxsize=4)
+def _lens_map(K_bytes: bytes, dist_bytes: bytes, h: int, w: int, f: int):
+    """For each supersampled pixel of a lens' view, where the pinhole view shows its point
+    (`cv2.remap`'s maps, float32; -1 where the lens model has no point): once per camera,
+    lens and size."""
+    K = np.frombuffer(K_bytes).reshape(3, 3)
+    dist = np.frombuffer(dist_bytes)
+    v, u = np.mgrid[0 : h * f, 0 : w * f].astype(float)
+    low = np.stack([(u - 0.5 * (f - 1)) / f, (v - 0.5 * (f - 1)) / f], axis=-1)
+    with jax.enable_x64(True):
+        ideal = np.asarray(undistort_pixels(low, K, dist))
+    ideal = np.where(np.isfinite(ideal), f * ideal + 0.5 * (f - 1), -1.0).astype(np.float32)
+    return ideal[..., 0], ideal[..., 1]
 
 
 def textured_table(shape: tuple[int, int] = (480, 640), seed: int = 0) -> np.ndarray:

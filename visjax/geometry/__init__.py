@@ -20,6 +20,11 @@ from ._decomposition import (
     decompose_homography_known_normal as decompose_homography_known_normal,
     select_solution as select_solution,
 )
+from ._distortion import (
+    DISTORTION_LENGTHS as DISTORTION_LENGTHS,
+    distort_pixels as distort_pixels,
+    undistort_pixels as undistort_pixels,
+)
 from ._homography import (
     Homography as Homography,
     alpha_g33 as alpha_g33,

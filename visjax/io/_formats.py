@@ -19,6 +19,7 @@ camera*):
 | `known_length` | (3,) | `(i, j, L)`: two feature indices (0 is feature 1) and their distance, m |
 | `velocity` | (N, 6) | truth, optional: $[v_e, \\omega_e]$ in the camera frame, m/s and rad/s |
 | `K`, `rho` | (6,) | optional gains (default: eq. (63) of the paper) |
+| `dist` | (k,) | optional: the lens' distortion (below) |
 
 Structure (Jang's thesis, *structure of a moving point seen by a moving camera*):
 
@@ -32,6 +33,7 @@ Structure (Jang's thesis, *structure of a moving point seen by a moving camera*)
 | `D` | (3,) | direction of the unknown input (the point's own motion), thesis eq. (3.1) |
 | `depth_guess` | () | optional: the observer's initial depth guess, m (default 1) |
 | `position` | (N, 3) | truth, optional: the point in the camera frame, m |
+| `dist` | (k,) | optional: the lens' distortion (below) |
 
 Euclidean (Nath, Dawson, Tatlicioglu, *Euclidean position estimation of static features
 using a moving uncalibrated camera*):
@@ -45,6 +47,16 @@ using a moving uncalibrated camera*):
 | `A_nominal`, `R_c_nominal` | (3, 3) | the nominal camera: intrinsics, mounting rotation |
 | `x_c_nominal` | (3,) | the nominal mounting offset (nominal: never the truth), m |
 | `features` | (n - k, 3) | truth, optional: world positions of the unknown features, m |
+| `dist` | (k,) | optional: the lens' distortion (below), with `A_nominal` |
+
+**Lens distortion.** The estimators assume a pinhole camera. A file whose pixels are as a
+real lens saw them gives that lens' distortion as `dist`: OpenCV's coefficients, in its
+order, 4, 5, 8, 12 or 14 of them (`k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[,
+tau_x, tau_y]]]]`), what `cv2.calibrateCamera` and a ROS `CameraInfo` give with the
+intrinsics. `load` checks the raw pixels, then undistorts them (`undistorted`,
+`visjax.geometry.undistort_pixels`, with the file's intrinsics) before anything else sees
+them; a pixel the lens model cannot have produced is refused. `load(path,
+undistort=False)` keeps the raw pixels (and `dist`).
 
 Conventions of eq. (5) of Nath et al.: a world point $w$ is at
 $R_c^T(R_b^T(w - x_b) - x_c)$ in the camera frame.
@@ -84,6 +96,7 @@ rests on too few frames.
 """
 
 import csv
+import dataclasses
 import math
 import os
 import zipfile
@@ -91,10 +104,12 @@ import zlib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+import jax
 import numpy as np
 import numpy.lib.format as npy_format
 
 from .._util import did_you_mean
+from ..geometry import DISTORTION_LENGTHS, undistort_pixels
 
 MAX_DATA_BYTES = 2 * 1024**3
 """The most bytes a data file's arrays may take once read (the sum of the uncompressed
@@ -467,12 +482,15 @@ class _Format:
 
     REQUIRED: tuple[str, ...] = ()
     NAME = ""
+    PIXELS: tuple[str, ...] = ("pixels",)  # the keys of pixels, undistorted by `undistorted`
+    INTRINSICS = "A"  # the key of the intrinsics `dist` goes with
 
     @classmethod
-    def load(cls, path):
+    def load(cls, path, *, undistort: bool = True):
         """Read and validate a `.npz` file (`read_npz`'s checks, then the format's): an
         unknown or missing key, a wrong shape or a bad value raises `DataFormatError`
-        naming the file and the key."""
+        naming the file and the key. With `dist` in the file, the pixels are then
+        undistorted (`undistorted`) unless `undistort=False`."""
         path = Path(path)
         known = [f.name for f in fields(cls)]
         with _open_npz(path) as zf:
@@ -496,9 +514,52 @@ class _Format:
         data = cls(**arrays)
         try:
             data.validate()
+            return data.undistorted() if undistort else data
         except DataFormatError as e:
             raise DataFormatError(f"{path}: {e}") from None
-        return data
+
+    def undistorted(self):
+        """The same data as a pinhole camera would have recorded it: every pixel key
+        undistorted (`visjax.geometry.undistort_pixels`, in float64, with the format's
+        intrinsics and `dist`), and no `dist`; itself when it has no `dist`.
+
+        **Raises:** `DataFormatError` for a seen pixel that the lens model cannot have
+        produced (beyond the largest radius its distortion reaches: coefficients of
+        another camera, or of another image size)."""
+        if self.dist is None:
+            return self
+        A = np.asarray(getattr(self, self.INTRINSICS), float)
+        dist = np.asarray(self.dist, float)
+        changes = {"dist": None}
+        for key in self.PIXELS:
+            p = getattr(self, key)
+            if p is None or not np.any(dist):
+                continue
+            p = np.asarray(p, float)
+            with jax.enable_x64(True):  # the file's precision, whatever the caller's
+                q = np.asarray(undistort_pixels(p, A, dist))
+            lost = np.all(np.isfinite(p), axis=-1) & ~np.all(np.isfinite(q), axis=-1)
+            if lost.any():
+                first = tuple(int(i) for i in np.argwhere(lost)[0])
+                raise DataFormatError(
+                    f"`{key}`: {int(lost.sum())} observation(s) (the first at index {first}, "
+                    f"{p[first]} px) lie where the lens model `dist` maps no point: the "
+                    "coefficients of another camera, or of another image size?"
+                )
+            changes[key] = q
+        return dataclasses.replace(self, **changes)
+
+    def _distortion(self):
+        if self.dist is None:
+            return
+        self._shape("dist", (None,))
+        if np.shape(self.dist)[0] not in DISTORTION_LENGTHS:
+            raise DataFormatError(
+                f"`dist` must hold 4, 5, 8, 12 or 14 coefficients (OpenCV's order: k1, k2, "
+                f"p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, tau_x, tau_y]]]]); got "
+                f"{np.shape(self.dist)[0]}."
+            )
+        self._finite("dist")
 
     def save(self, path) -> Path:
         """Write the arrays that are not `None` to a `.npz` file (validated first)."""
@@ -606,10 +667,12 @@ class VelocityData(_Format):
     velocity: np.ndarray | None = None
     K: np.ndarray | None = None
     rho: np.ndarray | None = None
+    dist: np.ndarray | None = None
     time_unit: str | None = None
 
     REQUIRED = ("t", "pixels", "A", "R_star", "s1", "known_length")
     NAME = "velocity"
+    PIXELS = ("pixels", "reference_pixels")
 
     def validate(self) -> None:
         n_t = np.shape(self.t)[0] if np.ndim(self.t) == 1 else None
@@ -630,6 +693,7 @@ class VelocityData(_Format):
         ):
             self._shape(key, shape)
         self._check_unit()
+        self._distortion()
         self._times()
         self._finite("t", "A", "R_star", "s1", "known_length", "velocity", "K", "rho")
         _check_intrinsics(self.A, "A")
@@ -678,6 +742,7 @@ class MovingPointData(_Format):
     D: np.ndarray
     depth_guess: np.ndarray | None = None
     position: np.ndarray | None = None
+    dist: np.ndarray | None = None
     time_unit: str | None = None
 
     REQUIRED = ("t", "pixels", "A", "camera_t", "camera_velocity", "D")
@@ -694,6 +759,7 @@ class MovingPointData(_Format):
         self._shape("position", (n_t, 3))
         self._shape("depth_guess", ())
         self._check_unit()
+        self._distortion()
         self._times()
         self._times("camera_t")
         self._finite("t", "A", "camera_t", "camera_velocity", "D", "position", "depth_guess")
@@ -734,6 +800,7 @@ class StaticPointsData(_Format):
     R_c_nominal: np.ndarray
     x_c_nominal: np.ndarray
     features: np.ndarray | None = None
+    dist: np.ndarray | None = None
     time_unit: str | None = None
 
     REQUIRED = (
@@ -747,6 +814,7 @@ class StaticPointsData(_Format):
         "x_c_nominal",
     )
     NAME = "static_points"
+    INTRINSICS = "A_nominal"
 
     def validate(self) -> None:
         self._shape("t", (None,))
@@ -769,6 +837,7 @@ class StaticPointsData(_Format):
         ):
             self._shape(key, shape)
         self._check_unit()
+        self._distortion()
         self._times()
         self._finite(
             "t",

@@ -23,19 +23,27 @@ The camera file is YAML or JSON, one mapping. Every problem takes the intrinsics
   platform's pose at the frames (`platform_R` (N, 3, 3), `platform_x` (N, 3)); the nominal
   mounting `R_c_nominal`, `x_c_nominal` (the intrinsics are `A_nominal`).
 
+Every problem also takes `dist`, the lens' distortion coefficients (OpenCV's order, 4, 5,
+8, 12 or 14 of them, with the intrinsics they were calibrated with): the data file keeps
+the tracks as the lens saw them with `dist` beside them (its `load` undistorts them), and
+`choose_coplanar` looks for the plane among the undistorted tracks.
+
 A path in the camera file is relative to the camera file's folder. Every missing or
 malformed entry is a `DataFormatError` naming it; the data file is then checked as every
 data file is (`VelocityData.validate` and the others).
 """
 
 import csv
+import dataclasses
 import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import jax
 import numpy as np
 
+from ..geometry import DISTORTION_LENGTHS, undistort_pixels
 from ._formats import (
     DataFormatError,
     MovingPointData,
@@ -172,17 +180,42 @@ def data_from_tracks(problem: str, tracks, camera, *, base: Path | None = None):
         camera = read_camera_file(camera)
     base = Path(".") if base is None else Path(base)
     A = intrinsics(camera, where)
-    build = {"velocity": _velocity, "moving_point": _moving_point, "static_points": _static}
-    data = build[problem](t, pixels, A, camera, where, base)
+    dist = _distortion(camera, where)
+    if problem == "velocity":
+        ideal = pixels  # the plane is one homography of the undistorted tracks only
+        if dist is not None:
+            with jax.enable_x64(True):
+                ideal = np.asarray(undistort_pixels(pixels, A, dist))
+        data = _velocity(t, pixels, A, camera, where, ideal)
+    else:
+        build = {"moving_point": _moving_point, "static_points": _static}
+        data = build[problem](t, pixels, A, camera, where, base)
+    if dist is not None:
+        data = dataclasses.replace(data, dist=dist)
     data.validate()
     return data
 
 
-def _velocity(t, pixels, A, camera, where, base) -> VelocityData:
+def _distortion(camera: Mapping, where: str) -> np.ndarray | None:
+    if "dist" not in camera:
+        return None
+    given = camera["dist"]
+    dist = np.asarray(given, float) if isinstance(given, list | tuple | np.ndarray) else None
+    if dist is None or dist.ndim != 1 or dist.shape[0] not in DISTORTION_LENGTHS:
+        raise DataFormatError(
+            f"{where}: `dist` must be a list of 4, 5, 8, 12 or 14 numbers (OpenCV's order: "
+            "k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4[, tau_x, tau_y]]]])."
+        )
+    if not np.all(np.isfinite(dist)):
+        raise DataFormatError(f"{where}: `dist` has a value that is not finite.")
+    return dist
+
+
+def _velocity(t, pixels, A, camera, where, ideal) -> VelocityData:
     if ("features" in camera) == ("coplanar" in camera):
         raise DataFormatError(f"{where}: the velocity problem needs `features` or `coplanar`.")
     if "coplanar" in camera:
-        features = choose_coplanar(pixels, _int(camera, "coplanar", where))
+        features = choose_coplanar(ideal, _int(camera, "coplanar", where))
     else:
         features = [_track(pixels, f, where) for f in _list(camera, "features", where)]
         if len(features) < 4:
