@@ -9,6 +9,7 @@ import math
 from . import io, report
 from ._util import did_you_mean
 from ._version import __version__
+from .frontend import TAG_FAMILIES
 from .plots import figure_formats
 from .studies import BUDGET, check_grid_text, parse_shard, problem_names, registered
 
@@ -234,6 +235,7 @@ EXAMPLES = {
     "track": [
         "visjax track plate.mp4 --out tracks.csv",
         "visjax track plate.mp4 --planar --max-features 50 --out tracks.npz",
+        "visjax track plate.mp4 --tags 36h11 --out tags.npz",
     ],
     "data": [
         "visjax data velocity --tracks tracks.npz --camera camera.yaml --out plate.npz",
@@ -325,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     arg(tr, "--out", None, None, "the tracks file: .npz or .csv", required=True)
     arg(tr, "--force", help="replace the tracks file if it exists", action="store_true")
     arg(tr, "--detector", None, "corners", "features to track", choices=("corners", "aruco"))
+    tags = "AprilTags of this family: their corners, found in every frame (feature 4 id + c)"
+    arg(tr, "--tags", None, None, tags, choices=TAG_FAMILIES)
     arg(tr, "--max-features", count, 200, "features alive at once (default 200)")
     arg(tr, "--fb-threshold", positive, 0.5, "forward-backward error that drops one, px")
     arg(tr, "--fps", positive, None, "frame rate (default: the video's)")

@@ -94,6 +94,8 @@ def _check(a) -> None:
     check_output_path(a.out, file=getattr(a, "out_is_file", False))
     if a.command == "track" and not Path(a.video).is_file():
         raise ValueError(f"video {a.video!r}: no such file")
+    if a.command == "track" and a.tags and (a.detector != "corners" or a.planar):
+        raise ValueError("--tags finds the tags in every frame: no --detector or --planar")
     for flag in ("tracks", "camera") if a.command == "data" else ():
         if not Path(getattr(a, flag)).is_file():
             raise ValueError(f"--{flag} {getattr(a, flag)!r}: no such file")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .frontend import read_video, track_frames
+from .frontend import read_video, track_frames, track_tags
 from .io import DataFormatError, command_summary, data_from_tracks, save_tracks_csv
 from .studies import (
     ROW_KEYS,
@@ -38,9 +38,12 @@ def track_report(
     homography_threshold=3.0,
     quiet=False,
     allow_damaged=False,
+    tags=None,
 ) -> dict:
     """Jang's thesis, sections 2.4 and 5.1: a video to pixel tracks by pyramidal KLT with a
-    forward-backward check (`visjax.frontend.track_frames`).
+    forward-backward check (`visjax.frontend.track_frames`); with `tags` (an AprilTag
+    family), the corners of the tags of that family found in every frame instead
+    (`visjax.frontend.track_tags`: feature 4 i + c is corner c of tag i).
 
     **Arguments:** `video` a file `visjax.frontend.read_video` reads (MP4 or `.npz`);
     `out` the tracks file: `.npz` with exactly the keys `t` (N,) seconds and `pixels`
@@ -69,14 +72,19 @@ def track_report(
     rate = video_fps if fps is None else fps
     if not (rate is not None and math.isfinite(rate) and rate > 0):
         raise DataFormatError(f"{video}: the video does not state its frame rate; give --fps.")
-    tracks = track_frames(
-        frames, fps=rate, detector=detector, max_features=max_features,
-        fb_threshold=fb_threshold, planar=planar, homography_threshold=homography_threshold,
-        progress=not quiet,
-    )  # fmt: skip
+    if tags is not None:
+        tracks = track_tags(frames, tags, fps=rate, progress=not quiet)
+    else:
+        tracks = track_frames(
+            frames, fps=rate, detector=detector, max_features=max_features,
+            fb_threshold=fb_threshold, planar=planar, homography_threshold=homography_threshold,
+            progress=not quiet,
+        )  # fmt: skip
     if tracks.pixels.shape[1] == 0:
         raise DataFormatError(
-            f"{video}: the {detector!r} detector found no feature to track (blank frames?)."
+            f"{video}: no {tags} AprilTag in any frame."
+            if tags is not None
+            else f"{video}: the {detector!r} detector found no feature to track (blank frames?)."
         )
     if out.suffix.lower() == ".csv":
         save_tracks_csv(out, tracks.t, tracks.pixels)
@@ -91,8 +99,16 @@ def track_report(
         "fraction_tracked": tracks.fraction_tracked,
         "lost_tracks": tracks.lost_counts(),
     }
+    if tags is not None:
+        seen = tracks.alive.reshape(tracks.pixels.shape[0], -1, 4).all(axis=-1)  # (N, tags)
+        summary["tags"] = {
+            int(i): round(float(seen[:, i].mean()), 4) for i in np.flatnonzero(seen.any(axis=0))
+        }  # id -> the fraction of frames it was found in
     if not quiet:
         lost = ", ".join(f"{k} {v}" for k, v in summary["lost_tracks"].items() if v)
+        if tags is not None:
+            found = ", ".join(f"{i} ({f:.0%} of frames)" for i, f in summary["tags"].items())
+            print(f"{tags} tags found: {found}; tag i's corners are features 4 i to 4 i + 3")
         print(
             f"tracked {summary['frames']} frames at {rate:g} Hz: {summary['features']} features "
             f"({summary['features_frame0']} in frame 0), "

@@ -123,6 +123,21 @@ def test_a_file_with_bad_coefficients_is_refused_naming_them(tmp_path, dist, say
         io.VelocityData.load(tmp_path / "plate.npz")
 
 
+def test_a_tags_corners_with_its_side_as_the_known_length():
+    """`tag: i` (the tracks of `visjax track --tags`: feature 4 i + c is corner c of tag i)
+    takes tracks 4 i to 4 i + 3 as the four coplanar features, and `tag_size` their first
+    side as the known length; a tag the tracks do not have is named."""
+    t, pixels = _plane_tracks()  # 11 tracks: "tags" 0, 1 and the start of 2
+    camera = {"A": K.tolist(), "tag": 1, "tag_size": 0.16}
+    data = io.data_from_tracks("velocity", (t, pixels), camera)
+    np.testing.assert_array_equal(data.pixels, pixels[:, 4:8])
+    assert data.length == (0, 1, 0.16)
+    with pytest.raises(DataFormatError, match="track 12 is not in the tracks file"):
+        io.data_from_tracks("velocity", (t, pixels), {**camera, "tag": 3})
+    with pytest.raises(DataFormatError, match="one of `features`, `coplanar` or `tag`"):
+        io.data_from_tracks("velocity", (t, pixels), {**camera, "coplanar": 5})
+
+
 def test_moving_point_and_static_points_files(tmp_path):
     """The moving point's file takes one track and the camera's velocity from a CSV
     (relative to the camera file); the static points' file the known and unknown tracks,
@@ -159,7 +174,7 @@ def test_moving_point_and_static_points_files(tmp_path):
     [
         ("velocity", {"fx": 300.0}, "fx, fy, cx, cy"),
         ("velocity", {"A": [[1, 2], [3, 4]]}, "`A` must have shape (3, 3)"),
-        ("velocity", {"A": K.tolist()}, "`features` or `coplanar`"),
+        ("velocity", {"A": K.tolist()}, "`features`, `coplanar` or `tag`"),
         ("velocity", {"A": K.tolist(), "features": [0, 1, 2, 99]}, "track 99 is not"),
         ("velocity", {"A": K.tolist(), "features": [0, 2, 3]}, "at least 4"),
         ("velocity", {"A": K.tolist(), "coplanar": 5}, "needs `known_length`"),

@@ -4,6 +4,7 @@ imported lazily; never jit)."""
 from ._klt import klt_track as klt_track, klt_translation as klt_translation
 from ._render import render_marker as render_marker
 from ._scene_render import (
+    TAG_FAMILIES as TAG_FAMILIES,
     Plane as Plane,
     fiducial_marker as fiducial_marker,
     plane_homography as plane_homography,
@@ -11,6 +12,7 @@ from ._scene_render import (
     render_planes as render_planes,
     textured_table as textured_table,
 )
+from ._tags import detect_tags as detect_tags, track_tags as track_tags
 from ._tracking import (
     LOST_REASONS as LOST_REASONS,
     Tracks as Tracks,

@@ -286,13 +286,22 @@ def textured_table(shape: tuple[int, int] = (480, 640), seed: int = 0) -> np.nda
 
 _ARUCO_DICTIONARY = "DICT_4X4_50"
 
+TAG_FAMILIES = ("16h5", "25h9", "36h10", "36h11")
+"""The AprilTag families OpenCV's ArUco module draws and detects (`DICT_APRILTAG_*`): a
+family's name stands for its dictionary wherever a dictionary is asked for."""
+
 
 def _aruco_dictionary(name: str):
     import cv2
 
+    if name in TAG_FAMILIES:
+        name = f"DICT_APRILTAG_{name}"
     code = getattr(cv2.aruco, name, None) if isinstance(name, str) else None
     if not isinstance(code, int) or not name.startswith("DICT_"):
-        raise ValueError(f"unknown ArUco dictionary {name!r} (e.g. 'DICT_4X4_50').")
+        raise ValueError(
+            f"unknown ArUco dictionary {name!r} (e.g. 'DICT_4X4_50', or an AprilTag family: "
+            f"{', '.join(TAG_FAMILIES)})."
+        )
     return cv2.aruco.getPredefinedDictionary(code)
 
 
@@ -303,11 +312,12 @@ def fiducial_marker(
     border_cells: int = 1,
     dictionary: str = _ARUCO_DICTIONARY,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """An ArUco marker texture with a white quiet zone.
+    """An ArUco marker (or AprilTag) texture with a white quiet zone.
 
     **Arguments:** `marker_id` in the dictionary; `cell` texture pixels per marker cell;
     `border_cells` the width of the white border in cells; `dictionary` the name of a
-    `cv2.aruco` predefined dictionary.
+    `cv2.aruco` predefined dictionary, or an AprilTag family (`TAG_FAMILIES`: `"36h11"`
+    draws the tag `marker_id` of the 36h11 family).
 
     **Returns:** `(texture, corners)`: the (H, W) uint8 texture (black 0, white 255) and
     (4, 2) the black square's outer corners in texture coordinates (x_t, y_t), top-left,

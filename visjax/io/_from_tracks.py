@@ -6,7 +6,9 @@ The camera file is YAML or JSON, one mapping. Every problem takes the intrinsics
 
 - `velocity` (Chitrakaran et al.): `features`, the track indices of n >= 4 coplanar
   features, feature 1 first; or `coplanar: N` instead, to choose N tracks seen in every
-  frame that follow one homography of the plane (`choose_coplanar`); `known_length`, two
+  frame that follow one homography of the plane (`choose_coplanar`); or `tag: i`, the
+  four corners of the AprilTag with id i of `visjax track --tags` (tracks 4 i to 4 i + 3),
+  with `tag_size`, its side in m, as the known length (corners 0 and 1); `known_length`, two
   features a known distance apart: `[i, j, L]` (positions in `features`, L in m) or
   `{from_px: [u, v], to_px: [u, v], length_m: L}` (the chosen features nearest those
   pixels of the reference frame, where one knows what is what); `R_star`, the object's
@@ -212,9 +214,17 @@ def _distortion(camera: Mapping, where: str) -> np.ndarray | None:
 
 
 def _velocity(t, pixels, A, camera, where, ideal) -> VelocityData:
-    if ("features" in camera) == ("coplanar" in camera):
-        raise DataFormatError(f"{where}: the velocity problem needs `features` or `coplanar`.")
-    if "coplanar" in camera:
+    if sum(k in camera for k in ("features", "coplanar", "tag")) != 1:
+        raise DataFormatError(
+            f"{where}: the velocity problem needs one of `features`, `coplanar` or `tag`."
+        )
+    if "tag" in camera:  # an AprilTag's corners (visjax track --tags): features 4 i + c
+        tag = _int(camera, "tag", where)
+        features = [_track(pixels, 4 * tag + c, where) for c in range(4)]
+        if "tag_size" in camera and "known_length" not in camera:
+            size = _array(camera, "tag_size", (), where)
+            camera = {**camera, "known_length": [0, 1, float(size)]}  # corners 0 and 1
+    elif "coplanar" in camera:
         features = choose_coplanar(ideal, _int(camera, "coplanar", where))
     else:
         features = [_track(pixels, f, where) for f in _list(camera, "features", where)]
