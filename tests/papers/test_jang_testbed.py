@@ -28,6 +28,16 @@ def test_moving_set_end_to_end():
 
 
 @pytest.mark.slow
+def test_an_apriltag_as_the_twins_marker():
+    """The twin's marker drawn as the AprilTag 0 of the 36h11 family (the same side):
+    found, tracked within 0.5 px, and the UIO from its tracked centre within 2x of the
+    exact pixels', as with the ArUco marker."""
+    r = jang.testbed("I.1", duration=DURATION, marker="36h11")
+    assert r.feasible and r.result == "successful"
+    check_testbed_tracking(r)
+
+
+@pytest.mark.slow
 def test_metre_reading_is_infeasible_on_a_puma():
     r = jang.testbed("I.1", units="m", duration=DURATION, track=False)
     assert not r.feasible

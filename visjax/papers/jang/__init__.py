@@ -285,6 +285,7 @@ def testbed(
     track: bool = True,
     keep_frames: bool = False,
     seed: int = 0,
+    marker: str = "DICT_4X4_50",
 ) -> TestbedRun:
     """Run one thesis set on the twin of its testbed, end to end.
 
@@ -314,6 +315,9 @@ def testbed(
        length unit, with `Kc_observer`; once from tracked pixels, once from exact ones.
 
     `track=False` skips rendering and tracking (the tracked pixels are then the exact ones).
+    `marker` the marker's dictionary: an ArUco one (default `"DICT_4X4_50"`, 6 cm), or an
+    AprilTag family (`"36h11"`, `visjax.frontend.TAG_FAMILIES`: the tag 0 of that family,
+    the same side), drawn, detected and tracked the same way.
     """
     import cv2  # noqa: F401  (the frontend needs OpenCV; fail early and clearly)
 
@@ -439,7 +443,7 @@ def testbed(
             0.002,
             _pose_matrix(np.eye(3), np.array([p_ref[0] - 1.0, p_ref[1] - 1.0, cfg["table_z"]])),
         )
-        marker_tex, marker_corners = fiducial_marker(0)
+        marker_tex, marker_corners = fiducial_marker(0, dictionary=marker)
         side_px = marker_corners[1, 0] - marker_corners[0, 0]
         scale = cfg["marker_side"] / side_px
         centre_tex = marker_corners.mean(axis=0)
@@ -450,16 +454,16 @@ def testbed(
             c_, s_ = np.cos(yaw[k]), np.sin(yaw[k])
             Rm = np.array([[c_, s_, 0.0], [s_, -c_, 0.0], [0.0, 0.0, -1.0]])
             origin = p_obj[k] - Rm @ np.array([*((centre_tex + 0.5) * scale), 0.0])
-            marker = Plane(marker_tex, scale, _pose_matrix(Rm, origin))
+            marker_plane = Plane(marker_tex, scale, _pose_matrix(Rm, origin))
             frames[i] = render_planes(
-                [table, marker],
+                [table, marker_plane],
                 Kt,
                 R_cam[k],
                 p_cam[k],
                 (h, w),
                 supersample=cfg["supersample"],
             )
-        tracks = track_marker(frames, fps=camera_hz, marker_id=0)
+        tracks = track_marker(frames, fps=camera_hz, marker_id=0, dictionary=marker)
         pixels = tracks.pixels[:, 4]  # the centre: the diagonals' intersection
         err = np.linalg.norm(pixels - pixels_true, axis=1)
         tracking_rms = float(np.sqrt(np.nanmean(err**2)))
