@@ -9,7 +9,7 @@ import math
 from . import io, report
 from ._util import did_you_mean
 from ._version import __version__
-from .frontend import TAG_FAMILIES
+from .frontend import BAG_PROBLEMS, TAG_FAMILIES
 from .plots import figure_formats
 from .studies import BUDGET, check_grid_text, parse_shard, problem_names, registered
 
@@ -241,6 +241,12 @@ EXAMPLES = {
         "visjax data velocity --tracks tracks.npz --camera camera.yaml --out plate.npz",
         "visjax data moving_point --tracks tracks.csv --camera camera.json --out point.npz",
     ],
+    "import-bag": [
+        "visjax import-bag plate.bag --problem velocity --image-topic /camera/image_raw "
+        "--camera-info /camera/camera_info --tags 36h11 --camera tag.yaml --out plate.npz",
+        "visjax import-bag run1 --problem moving_point --image-topic /cam/image "
+        "--camera-info /cam/camera_info --odometry /odom --camera point.yaml --out point.npz",
+    ],
     "testbed": [
         "visjax testbed --set I.1 --duration 10 --no-video --out twin",
         "visjax testbed --out twin",
@@ -348,6 +354,24 @@ def build_parser() -> argparse.ArgumentParser:
     arg(da, "--force", help="replace the data file if it exists", action="store_true")
     arg(da, "--quiet", help="print nothing", action="store_true")
     da.set_defaults(out_is_file=True)
+
+    ib = sub.add_parser("import-bag", help="a ROS bag (1 or 2) to a problem's data file")
+    ib.add_argument("bag", help="the .bag file, or the ROS 2 bag's folder")
+    arg(ib, "--problem", None, None, "the problem", required=True, choices=BAG_PROBLEMS)
+    arg(ib, "--image-topic", None, None, "the camera's images", required=True)
+    arg(ib, "--camera-info", None, None, "the camera's CameraInfo topic", required=True)
+    velocity = ib.add_mutually_exclusive_group()
+    arg(velocity, "--twist", None, None, "the body's TwistStamped topic")
+    arg(velocity, "--odometry", None, None, "the body's Odometry topic")
+    arg(ib, "--tags", None, None, "track AprilTags of this family (else KLT)", choices=TAG_FAMILIES)
+    what = "what the bag cannot tell (YAML or JSON, as for visjax data, without intrinsics)"
+    arg(ib, "--camera", None, None, what)
+    pose = "the camera's pose in the body frame, 'x y z qx qy qz qw' (without /tf_static)"
+    arg(ib, "--camera-from-body", None, None, pose)
+    arg(ib, "--out", None, None, "the data file (.npz)", required=True)
+    arg(ib, "--force", help="replace the data file if it exists", action="store_true")
+    arg(ib, "--quiet", help="print nothing", action="store_true")
+    ib.set_defaults(out_is_file=True)
 
     tb = sub.add_parser("testbed", help="Jang's thesis end to end on a twin of its testbed")
     arg(tb, "--set", set_name, None, "I.1 ... II.3 (repeatable; default all)", action="append")

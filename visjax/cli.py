@@ -10,7 +10,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from . import _options as o, report, studies, verbs
+from . import _options as o, io, report, studies, verbs
 from ._options import build_parser
 from ._xla_workaround import apply_xla_cpu_workarounds
 from .estimators import MAX_STEPS
@@ -47,10 +47,9 @@ def _call(a):
     if a.request is not None:
         verb = getattr(verbs, f"{_VERBS[a.request.command]}_command")
         return verb(a.request) if a.command == "merge" else verb(a.request, built=a.built)
-    if a.command in ("reproduce", "track", "data"):
-        fn = getattr(
-            report, {"track": "track_report", "data": "data_report"}.get(a.command, "reproduce")
-        )
+    if a.command in ("reproduce", "track", "data", "import-bag"):
+        names = {"track": "track_report", "data": "data_report", "import-bag": "import_bag_report"}
+        fn = getattr(report, names.get(a.command, "reproduce"))
         accepted = inspect.signature(fn).parameters
     else:
         entry = studies.registered_reproduction(a.command)
@@ -96,6 +95,10 @@ def _check(a) -> None:
         raise ValueError(f"video {a.video!r}: no such file")
     if a.command == "track" and a.tags and (a.detector != "corners" or a.planar):
         raise ValueError("--tags finds the tags in every frame: no --detector or --planar")
+    if a.command == "import-bag" and not Path(a.bag).exists():
+        raise ValueError(f"bag {a.bag!r}: no such file or folder")
+    if getattr(a, "camera_from_body", None) is not None:
+        io.pose_from_text(a.camera_from_body)  # seven numbers, or one line saying so
     for flag in ("tracks", "camera") if a.command == "data" else ():
         if not Path(getattr(a, flag)).is_file():
             raise ValueError(f"--{flag} {getattr(a, flag)!r}: no such file")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .frontend import read_video, track_frames, track_tags
+from .frontend import import_bag, read_video, track_frames, track_tags
 from .io import DataFormatError, command_summary, data_from_tracks, save_tracks_csv
 from .studies import (
     ROW_KEYS,
@@ -137,6 +137,39 @@ def data_report(problem, tracks, camera, out, *, quiet=False) -> dict:
     if not quiet:
         print(
             f"{problem} data: {summary['frames']} frames, {n} feature(s), "
+            f"{summary['dropped_fraction']:.1%} of frames missing one; wrote {out}; "
+            f"next: visjax run {problem} --data {out}"
+        )
+    return summary
+
+
+def import_bag_report(
+    bag, problem, image_topic, camera_info, out, *, twist=None, odometry=None, tags=None,
+    camera=None, camera_from_body=None, quiet=False,
+) -> dict:  # fmt: skip
+    """A ROS bag to `problem`'s data file `out` (`.npz`): `visjax.frontend.import_bag`,
+    then saved (checked as every data file is); prints what it read. **Returns:**
+    `{"problem", "frames", "features", "dropped_fraction", "distortion"}`. Raises
+    `visjax.io.DataFormatError` naming what is missing or wrong (nothing written)."""
+    out = Path(out)
+    if out.suffix.lower() != ".npz":
+        raise ValueError(f"{out}: the data file must end in .npz.")
+    data = import_bag(
+        bag, problem, image_topic=image_topic, camera_info=camera_info, twist=twist,
+        odometry=odometry, tags=tags, camera=camera, camera_from_body=camera_from_body,
+        progress=not quiet,
+    )  # fmt: skip
+    data.save(out)
+    n = 1 if data.pixels.ndim == 2 else data.pixels.shape[1]
+    summary = {
+        "problem": problem, "frames": int(data.t.shape[0]), "features": int(n),
+        "dropped_fraction": float(data.dropped_fraction()),
+        "distortion": None if data.dist is None else [float(x) for x in data.dist],
+    }  # fmt: skip
+    if not quiet:
+        lens = "no distortion" if data.dist is None else f"{len(data.dist)} distortion terms"
+        print(
+            f"{problem} data from {bag}: {summary['frames']} frames, {n} feature(s), {lens}, "
             f"{summary['dropped_fraction']:.1%} of frames missing one; wrote {out}; "
             f"next: visjax run {problem} --data {out}"
         )

@@ -1,6 +1,7 @@
 """Pixels from images: KLT tracking, video files and synthetic rendering (NumPy and OpenCV,
 imported lazily; never jit)."""
 
+from ._bags import BAG_PROBLEMS as BAG_PROBLEMS, import_bag as import_bag
 from ._klt import klt_track as klt_track, klt_translation as klt_translation
 from ._render import render_marker as render_marker
 from ._scene_render import (

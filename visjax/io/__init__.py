@@ -5,6 +5,11 @@ the outputs of the command line: the schema of every `summary.json`, table and a
 staged (atomic) output folders (`staged_output`); and the writing of a command's files and
 summary (`Outputs`, `write_outputs`, `command_summary`)."""
 
+from ._bags import (
+    BagRecording as BagRecording,
+    pose_from_text as pose_from_text,
+    read_bag as read_bag,
+)
 from ._formats import (
     DATA_FORMATS as DATA_FORMATS,
     DROPPED_RESULT as DROPPED_RESULT,

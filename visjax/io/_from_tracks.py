@@ -19,7 +19,7 @@ The camera file is YAML or JSON, one mapping. Every problem takes the intrinsics
   direction of the unknown input (the point's own motion, thesis eq. (3.1)); `depth_guess`
   (optional); `camera_velocity`, a file (NPZ with `t` and `velocity`, or CSV with columns
   `t, v_x, v_y, v_z, omega_x, omega_y, omega_z`) of the camera's measured velocity in its
-  own frame, m/s and rad/s.
+  own frame, m/s and rad/s (in Python, also a mapping of those two arrays).
 - `static_points` (Nath et al.): `known` and `unknown`, track indices; `known_features`,
   the known features' world positions (k, 3), m; `platform`, an NPZ file with the
   platform's pose at the frames (`platform_R` (N, 3, 3), `platform_x` (N, 3)); the nominal
@@ -262,8 +262,11 @@ def _velocity(t, pixels, A, camera, where, ideal) -> VelocityData:
 def _moving_point(t, pixels, A, camera, where, base) -> MovingPointData:
     feature = _track(pixels, _need(camera, "feature", where), where)
     D = _array(camera, "D", (3,), where)
-    source = base / str(_need(camera, "camera_velocity", where))
-    camera_t, velocity = _camera_velocity(source)
+    given = _need(camera, "camera_velocity", where)
+    if isinstance(given, Mapping):  # in Python: the arrays themselves (`import_bag`)
+        camera_t, velocity = (np.asarray(given[k], float) for k in ("t", "velocity"))
+    else:
+        camera_t, velocity = _camera_velocity(base / str(given))
     optional = {}
     if "depth_guess" in camera:
         optional["depth_guess"] = np.asarray(float(camera["depth_guess"]))
