@@ -39,12 +39,17 @@ def write_bag(
     encoding: str = "mono8",
     storage: str = "sqlite3",
     image_header_ns=None,
+    joints=None,
+    stamps_joints_ns=None,
+    poses=None,
 ) -> Path:
     """Write a bag: `ros` "1" (a `.bag` file) or "2" (a folder; `storage` sqlite3 or mcap).
     `velocity` (M, 6), linear first, in `body_frame`, stamped `stamps_velocity_ns`;
     `camera_from_body` (4 x 4) written to /tf_static (body -> "camera"; ROS 2 only: ROS 1's
     type store has no tf2_msgs). `image_header_ns`: the images' header stamps, when they
-    differ from the times the bag received them."""
+    differ from the times the bag received them. `joints` (M, n) joint angles, rad, as
+    /joint_states (positions only), stamped `stamps_joints_ns`. `poses` (M, 4, 4) the
+    body's pose in "odom" with an odometry `velocity` (default the identity)."""
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC if ros == "1" else Stores.ROS2_HUMBLE)
@@ -110,17 +115,17 @@ def write_bag(
                 else "nav_msgs/msg/Odometry"
             )
             conn = writer.add_connection(velocity_topic, kind, typestore=ts)
-            for ns, v in zip(stamps_velocity_ns, np.asarray(velocity, float)):
+            for i, (ns, v) in enumerate(zip(stamps_velocity_ns, np.asarray(velocity, float))):
                 twist = T["geometry_msgs/msg/Twist"](linear=vec(v[:3]), angular=vec(v[3:]))
                 if velocity_kind == "twist":
                     msg = T[kind](header=header(int(ns), body_frame), twist=twist)
                 else:
+                    P = np.eye(4) if poses is None else np.asarray(poses[i], float)
+                    qx, qy, qz, qw = _quaternion(P[:3, :3])
                     pose = T["geometry_msgs/msg/PoseWithCovariance"](
                         pose=T["geometry_msgs/msg/Pose"](
-                            position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
-                            orientation=T["geometry_msgs/msg/Quaternion"](
-                                x=0.0, y=0.0, z=0.0, w=1.0
-                            ),
+                            position=T["geometry_msgs/msg/Point"](x=P[0, 3], y=P[1, 3], z=P[2, 3]),
+                            orientation=T["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
                         ),
                         covariance=np.zeros(36),
                     )
@@ -133,6 +138,14 @@ def write_bag(
                         pose=pose,
                         twist=cov,
                     )
+                writer.write(conn, int(ns), serialize(msg, kind))
+        if joints is not None:
+            kind = "sensor_msgs/msg/JointState"
+            conn = writer.add_connection("/joint_states", kind, typestore=ts)
+            for ns, q in zip(stamps_joints_ns, np.asarray(joints, float)):
+                names = [f"joint_{i + 1}" for i in range(len(q))]
+                msg = T[kind](header=header(int(ns), ""), name=names, position=q,
+                              velocity=np.zeros(0), effort=np.zeros(0))  # fmt: skip
                 writer.write(conn, int(ns), serialize(msg, kind))
         if camera_from_body is not None:
             kind = "tf2_msgs/msg/TFMessage"

@@ -363,6 +363,8 @@ def build_parser() -> argparse.ArgumentParser:
     velocity = ib.add_mutually_exclusive_group()
     arg(velocity, "--twist", None, None, "the body's TwistStamped topic")
     arg(velocity, "--odometry", None, None, "the body's Odometry topic")
+    arg(velocity, "--joint-states", None, None, "the robot's JointState topic (with --robot)")
+    arg(ib, "--robot", None, None, "the robot of --joint-states", choices=("puma560", "two_link"))
     arg(ib, "--tags", None, None, "track AprilTags of this family (else KLT)", choices=TAG_FAMILIES)
     what = "what the bag cannot tell (YAML or JSON, as for visjax data, without intrinsics)"
     arg(ib, "--camera", None, None, what)

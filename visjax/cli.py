@@ -97,6 +97,8 @@ def _check(a) -> None:
         raise ValueError("--tags finds the tags in every frame: no --detector or --planar")
     if a.command == "import-bag" and not Path(a.bag).exists():
         raise ValueError(f"bag {a.bag!r}: no such file or folder")
+    if a.command == "import-bag" and (a.joint_states is None) != (a.robot is None):
+        raise ValueError("--joint-states needs --robot, and --robot needs --joint-states")
     if getattr(a, "camera_from_body", None) is not None:
         io.pose_from_text(a.camera_from_body)  # seven numbers, or one line saying so
     for flag in ("tracks", "camera") if a.command == "data" else ():

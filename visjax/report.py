@@ -144,8 +144,8 @@ def data_report(problem, tracks, camera, out, *, quiet=False) -> dict:
 
 
 def import_bag_report(
-    bag, problem, image_topic, camera_info, out, *, twist=None, odometry=None, tags=None,
-    camera=None, camera_from_body=None, quiet=False,
+    bag, problem, image_topic, camera_info, out, *, twist=None, odometry=None,
+    joint_states=None, robot=None, tags=None, camera=None, camera_from_body=None, quiet=False,
 ) -> dict:  # fmt: skip
     """A ROS bag to `problem`'s data file `out` (`.npz`): `visjax.frontend.import_bag`,
     then saved (checked as every data file is); prints what it read. **Returns:**
@@ -156,8 +156,8 @@ def import_bag_report(
         raise ValueError(f"{out}: the data file must end in .npz.")
     data = import_bag(
         bag, problem, image_topic=image_topic, camera_info=camera_info, twist=twist,
-        odometry=odometry, tags=tags, camera=camera, camera_from_body=camera_from_body,
-        progress=not quiet,
+        odometry=odometry, joint_states=joint_states, robot=robot, tags=tags, camera=camera,
+        camera_from_body=camera_from_body, progress=not quiet,
     )  # fmt: skip
     data.save(out)
     n = 1 if data.pixels.ndim == 2 else data.pixels.shape[1]

@@ -11,8 +11,16 @@ import pytest
 from tests.bag_writer import write_bag
 from visjax import io
 from visjax.cli import main
-from visjax.frontend import Plane, fiducial_marker, import_bag, render_planes
+from visjax.frontend import (
+    Plane,
+    fiducial_marker,
+    import_bag,
+    project_points,
+    render_planes,
+    track_tags,
+)
 from visjax.io import DataFormatError
+from visjax.kinematics import TwoLinkArm
 
 pytest.importorskip("rosbags")
 
@@ -164,3 +172,83 @@ def test_a_bag_of_a_tag_to_the_velocity_problems_file(tmp_path):
     assert np.abs(loaded.pixels - ideal).max() < 0.5  # undistorted: the pinhole's pixels
     with pytest.raises(DataFormatError, match="the intrinsics and the distortion"):
         import_bag(path, "velocity", **topics, camera={"A": K2.tolist(), "tag": 2})
+
+
+def test_a_two_link_arms_joint_states_give_its_end_links_twist(tmp_path):
+    """A camera on a two-link planar arm's end link (the same frame): its twist from
+    /joint_states (central differences of the angles) against central differences of the
+    end link's pose from the forward kinematics, in the link's frame."""
+    arm = TwoLinkArm(0.5, 0.4)
+    t = np.arange(40) / 200.0
+    q = np.c_[0.3 + 0.2 * t + 0.1 * t**2, 0.5 - 0.1 * t]
+    stamps = T0 + np.rint(t * 1e9).astype(np.int64)
+    path = write_bag(tmp_path / "arm.bag", "1", FRAMES, STAMPS, K, joints=q,
+                     stamps_joints_ns=stamps)  # fmt: skip
+    rec = _read(path, joint_states_topic="/joint_states", robot=arm,
+                camera_from_body="0 0 0 0 0 0 1")  # fmt: skip
+    k, h = 20, 1e-6
+
+    def angles(tk):
+        return np.array([0.3 + 0.2 * tk + 0.1 * tk**2, 0.5 - 0.1 * tk])
+
+    v = (np.asarray(arm.forward(angles(t[k] + h))) - np.asarray(arm.forward(angles(t[k] - h)))) / (
+        2 * h
+    )
+    theta = angles(t[k]).sum()
+    R = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    expected = np.r_[R.T @ v, 0.0, 0.0, 0.0, 0.2 + 0.2 * t[k] - 0.1]
+    np.testing.assert_allclose(rec.velocity[k], expected, atol=1e-6)  # q'' small: O(h^2)
+    with pytest.raises(ValueError, match="needs its link lengths"):
+        _read(path, joint_states_topic="/joint_states", robot="two_link")
+
+
+def test_a_bag_of_a_moving_platform_to_the_static_points_file(tmp_path):
+    """A camera mounted on a moving platform (/tf_static) sees two AprilTags: tag 0's
+    corners known, tag 1's unknown. `import_bag` takes the platform's pose from the
+    odometry, interpolated to the frames (here half way between its samples), and the
+    nominal mounting from /tf_static; the corners are where the camera projects them."""
+    K2 = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])
+    mount = np.eye(4)
+    mount[:3, :3], mount[:3, 3] = _rotation([1.0, 0.0, 0.0], 0.1), [0.05, 0.0, 0.0]
+
+    def body(t):
+        P = np.eye(4)
+        P[:3, :3], P[:3, 3] = _rotation([0.0, 1.0, 0.0], 0.2 * t), [0.1 * t, 0.0, 0.0]
+        return P
+
+    tags, corners = [], []
+    for i, x in enumerate((-0.16, 0.02)):
+        tex, c = fiducial_marker(i, cell=12, dictionary="36h11")  # 10 cm at 1 m
+        T = np.eye(4)
+        T[:3, 3] = [x, -0.04, 1.0]
+        tags.append(Plane(tex, 0.001, T))
+        corners.append(tags[-1].world_points(c))
+    t_frames = np.arange(4) / 10.0 + 0.025  # between the 20 Hz odometry samples
+    frames = []
+    for tk in t_frames:
+        camera = body(tk) @ mount
+        frames.append(render_planes(tags, K2, camera[:3, :3], camera[:3, 3], (240, 320)))
+    t_odom = np.arange(12) / 20.0
+    stamps = T0 + np.rint(t_frames * 1e9).astype(np.int64)
+    path = write_bag(tmp_path / "platform", "2", np.stack(frames), stamps, K2,
+                     velocity=np.zeros((12, 6)), velocity_kind="odometry", body_frame="base",
+                     stamps_velocity_ns=T0 + np.rint(t_odom * 1e9).astype(np.int64),
+                     poses=[body(tk) for tk in t_odom], camera_from_body=mount)  # fmt: skip
+    constants = {"known": [0, 1, 2, 3], "unknown": [4, 5, 6, 7],
+                 "known_features": corners[0].tolist()}  # fmt: skip
+    topics = {"image_topic": "/camera/image", "camera_info": "/camera/camera_info"}
+    data = import_bag(path, "static_points", **topics, odometry="/body/velocity", tags="36h11",
+                      camera=constants)  # fmt: skip
+    np.testing.assert_allclose(data.R_c_nominal, mount[:3, :3], atol=1e-12)
+    np.testing.assert_allclose(data.x_c_nominal, mount[:3, 3], atol=1e-12)
+    t_abs = data.t + t_frames[0]  # the file's times count from the first frame
+    truth = np.stack([body(tk) for tk in t_abs])
+    np.testing.assert_allclose(data.platform_x, truth[:, :3, 3], atol=1e-12)  # linear motion
+    np.testing.assert_allclose(data.platform_R, truth[:, :3, :3], atol=1e-12)  # one axis
+    np.testing.assert_array_equal(data.pixels, track_tags(np.stack(frames)).pixels)
+    for k, tk in enumerate(t_frames):  # where the camera projects them (10 cm tags a metre
+        camera = body(tk) @ mount  # away: their corners found to 0.6 px at most)
+        seen = np.concatenate(
+            [project_points(K2, camera[:3, :3], camera[:3, 3], c) for c in corners]
+        )
+        assert np.abs(data.pixels[k] - seen).max() < 1.0

@@ -10,11 +10,13 @@ What is read, per topic (the message types of ROS 1 and ROS 2 alike):
   intrinsics `A`, `D` as OpenCV's distortion coefficients `dist` (the `plumb_bob` and
   `rational_polynomial` models; a fisheye model is refused);
 - a velocity topic: `geometry_msgs/TwistStamped` (the body's twist in its own frame, the
-  header's `frame_id`) or `nav_msgs/Odometry` (its `twist`, in `child_frame_id`),
-  expressed in the camera frame through the camera's pose in the body frame: the
-  `/tf_static` transform from the body frame to the camera's (the camera info's
-  `frame_id`) when the bag has one, else `camera_from_body` (identity when the two frames
-  are one).
+  header's `frame_id`) or `nav_msgs/Odometry` (its `twist`, in `child_frame_id`), or
+  `sensor_msgs/JointState` of a robot (`ROBOTS`: the joints in the message's order; their
+  rates from `velocity` where every message has them, else central differences of the
+  angles), whose tool is the body (its frame `tool`), expressed in the camera frame
+  through the camera's pose in the body frame: the `/tf_static` transform from the body
+  frame to the camera's (the camera info's `frame_id`) when the bag has one, else
+  `camera_from_body` (identity when the two frames are one).
 
 Times: each message's header stamp (the bag's receive time where a stamp is zero), in
 integer nanoseconds, less the first image's, then in seconds. A missing topic, a topic of
@@ -29,6 +31,7 @@ import numpy as np
 
 from .._util import did_you_mean
 from ..geometry import DISTORTION_LENGTHS
+from ..kinematics import TwoLinkArm, puma560
 from ._formats import DataFormatError
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -36,6 +39,11 @@ CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+ROBOTS = ("puma560", "two_link")
+"""The robots whose joint states `read_bag` turns into the tool's velocity: the PUMA 560 of
+Jang's thesis (Table 4-1, `visjax.kinematics.puma560`, its sixth joint frame the body's)
+and a two-link planar arm (`visjax.kinematics.TwoLinkArm`, its end link the body)."""
 _CHANNELS = {"mono8": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}
 
 
@@ -45,7 +53,10 @@ class BagRecording:
     (N, H, W) uint8 grey; `A` (3, 3); `dist` OpenCV's coefficients or `None`;
     `camera_frame` the camera info's frame; `velocity_t` (M,) s and `velocity` (M, 6)
     $[v_c, \\omega_c]$ of the camera in its own frame, m/s and rad/s (`None` without a
-    velocity topic); `start_ns` the first frame's stamp, ns."""
+    velocity topic); `start_ns` the first frame's stamp, ns; `body_R` (M, 3, 3) and
+    `body_x` (M, 3) the body's pose at `velocity_t` (an odometry topic's, else `None`);
+    `camera_from_body` (4 x 4) the camera's pose in the body frame used (`None`: the same
+    frame)."""
 
     t: np.ndarray
     frames: np.ndarray
@@ -55,6 +66,28 @@ class BagRecording:
     velocity_t: np.ndarray | None
     velocity: np.ndarray | None
     start_ns: int
+    body_R: np.ndarray | None = None
+    body_x: np.ndarray | None = None
+    camera_from_body: np.ndarray | None = None
+
+    def body_pose_at(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """The body's pose (odometry) at times `t` (K,): `(R (K, 3, 3), x (K, 3))`,
+        interpolated between the odometry's samples (linearly, and along the rotation's
+        geodesic). **Raises:** `DataFormatError` for a time outside the odometry's."""
+        if self.body_R is None:
+            raise DataFormatError("the body's pose needs an odometry topic.")
+        t, ts = np.asarray(t, float), self.velocity_t
+        if t.min() < ts[0] or t.max() > ts[-1]:
+            raise DataFormatError(
+                f"the odometry covers {ts[0]:.6g} to {ts[-1]:.6g} s of the frames' {t.min():.6g} "
+                f"to {t.max():.6g} s: the platform's pose must be known at every frame."
+            )
+        k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2)
+        s = ((t - ts[k]) / (ts[k + 1] - ts[k]))[:, None]
+        x = (1 - s) * self.body_x[k] + s * self.body_x[k + 1]
+        R = np.stack([_geodesic(self.body_R[i], self.body_R[i + 1], float(f))
+                      for i, f in zip(k, s[:, 0])])  # fmt: skip
+        return R, x
 
 
 def _stamp(msg, received: int) -> int:
@@ -182,6 +215,18 @@ def _static_transform(reader, parent: str, child: str) -> np.ndarray | None:
     return None
 
 
+def _geodesic(R0, R1, s: float) -> np.ndarray:
+    """The rotation a fraction `s` of the way from `R0` to `R1` (about their relative axis)."""
+    D = R0.T @ R1
+    angle = np.arccos(np.clip((np.trace(D) - 1) / 2, -1.0, 1.0))
+    if angle < 1e-12:
+        return R0
+    axis = np.array([D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]]) / (2 * np.sin(angle))
+    W = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    a = s * angle
+    return R0 @ (np.eye(3) + np.sin(a) * W + (1 - np.cos(a)) * W @ W)
+
+
 def _camera_twist(v_b: np.ndarray, T_body_camera: np.ndarray) -> np.ndarray:
     """A body's twist (M, 6), linear first, in the body frame, as the twist of a camera
     rigidly mounted at `T_body_camera`, in the camera frame:
@@ -191,6 +236,29 @@ def _camera_twist(v_b: np.ndarray, T_body_camera: np.ndarray) -> np.ndarray:
     return np.concatenate([(v + np.cross(w, p)) @ R, w @ R], axis=1)
 
 
+def _joint_twists(msgs, robot, bag, topic) -> np.ndarray:
+    """The tool's twist (M, 6), linear first, in the tool's frame, from joint states."""
+    n = 2 if isinstance(robot, TwoLinkArm) else 6
+    q = [np.asarray(m.position, float) for _, m in msgs]
+    if any(x.shape[0] < n for x in q):
+        raise DataFormatError(f"{bag}: topic {topic!r}: a message has fewer than {n} joints.")
+    q = np.stack([x[:n] for x in q])
+    rates = [np.asarray(m.velocity, float) for _, m in msgs]
+    if all(r.shape[0] >= n for r in rates):
+        qdot = np.stack([r[:n] for r in rates])
+    else:
+        qdot = np.gradient(q, np.array([s for s, _ in msgs], np.int64) / 1e9, axis=0)
+    if isinstance(robot, TwoLinkArm):  # the end link turns by q1 + q2 about the base z
+        out = []
+        for qk, rk in zip(q, qdot):
+            v = np.asarray(robot.jacobian(qk)) @ rk
+            c, s_ = np.cos(qk.sum()), np.sin(qk.sum())
+            out.append([c * v[0] + s_ * v[1], -s_ * v[0] + c * v[1], 0.0, 0.0, 0.0, rk.sum()])
+        return np.array(out)
+    chain = puma560() if isinstance(robot, str) else robot
+    return np.stack([np.asarray(chain.tool_twist(qk, rk, local=True)) for qk, rk in zip(q, qdot)])
+
+
 def read_bag(
     path,
     *,
@@ -198,13 +266,17 @@ def read_bag(
     camera_info_topic: str,
     twist_topic: str | None = None,
     odometry_topic: str | None = None,
+    joint_states_topic: str | None = None,
+    robot=None,
     camera_from_body=None,
 ) -> BagRecording:
     """Read a camera's recording from a ROS 1 or ROS 2 bag (the module docstring).
 
     **Arguments:** `path` the `.bag` file or the ROS 2 bag's folder; the topics; at most
-    one of `twist_topic` and `odometry_topic`; `camera_from_body` the camera's pose in the
-    body frame (4 x 4, or `x y z qx qy qz qw`), used where `/tf_static` has none.
+    one of `twist_topic`, `odometry_topic` and `joint_states_topic` (with `robot`:
+    `"puma560"`, a `kinematics.SerialChain` or a `kinematics.TwoLinkArm`);
+    `camera_from_body` the camera's pose in the body frame (4 x 4, or `x y z qx qy qz
+    qw`), used where `/tf_static` has none.
 
     **Raises:** `DataFormatError` naming what is missing or wrong; `ImportError` saying
     how to install `rosbags` when it is not."""
@@ -215,8 +287,15 @@ def read_bag(
         raise ImportError(
             "reading ROS bags needs the optional extra: pip install 'visjax[ros]'"
         ) from None
-    if twist_topic is not None and odometry_topic is not None:
-        raise ValueError("give one velocity topic: a twist or an odometry topic, not both.")
+    if sum(x is not None for x in (twist_topic, odometry_topic, joint_states_topic)) > 1:
+        raise ValueError("give one velocity topic: twist, odometry or joint states.")
+    if (joint_states_topic is None) != (robot is None):
+        raise ValueError("joint states need their robot, and a robot its joint states.")
+    if isinstance(robot, str) and robot != "puma560":
+        raise ValueError(
+            f"robot {robot!r}: by name, only 'puma560' (a two-link arm needs its link "
+            "lengths: give a kinematics.TwoLinkArm)."
+        )
     path = Path(path)
     if not path.exists():
         raise DataFormatError(f"{path}: no such bag.")
@@ -232,17 +311,21 @@ def read_bag(
         frames = np.stack([_grey(m, path, image_topic) for _, m in images])
         start = images[0][0]
         t = (np.array([s for s, _ in images], np.int64) - start) / 1e9
-        velocity_t = velocity = None
-        topic = twist_topic or odometry_topic
+        velocity_t = velocity = body_R = body_x = T = None
+        topic = twist_topic or odometry_topic or joint_states_topic
         camera_frame = info.header.frame_id.strip("/")
         if topic is not None:
-            kind = TWIST_TYPE if twist_topic is not None else ODOMETRY_TYPE
+            kind = (TWIST_TYPE if twist_topic is not None else ODOMETRY_TYPE
+                    if odometry_topic is not None else JOINT_STATE_TYPE)  # fmt: skip
             msgs = _messages(reader, path, topic, (kind,))
-            twists = [m.twist if kind == TWIST_TYPE else m.twist.twist for _, m in msgs]
-            v_b = np.array([[w.linear.x, w.linear.y, w.linear.z,
-                             w.angular.x, w.angular.y, w.angular.z] for w in twists])  # fmt: skip
             first = msgs[0][1]
-            body = first.header.frame_id if kind == TWIST_TYPE else first.child_frame_id
+            if kind == JOINT_STATE_TYPE:
+                v_b, body = _joint_twists(msgs, robot, path, topic), "tool"
+            else:
+                twists = [m.twist if kind == TWIST_TYPE else m.twist.twist for _, m in msgs]
+                v_b = np.array([[w.linear.x, w.linear.y, w.linear.z, w.angular.x, w.angular.y,
+                                 w.angular.z] for w in twists])  # fmt: skip
+                body = first.header.frame_id if kind == TWIST_TYPE else first.child_frame_id
             body = body.strip("/")
             T = None if body == camera_frame else _static_transform(reader, body, camera_frame)
             if T is None and body != camera_frame:
@@ -257,6 +340,13 @@ def read_bag(
                 T = pose_from_text(T)
             velocity = v_b if T is None else _camera_twist(v_b, np.asarray(T, float))
             velocity_t = (np.array([s for s, _ in msgs], np.int64) - start) / 1e9
+            if kind == ODOMETRY_TYPE:  # the body's pose in the odometry's frame
+                poses = [m.pose.pose for _, m in msgs]
+                body_R = np.stack([_quaternion_matrix(p.orientation) for p in poses])
+                body_x = np.array([[p.position.x, p.position.y, p.position.z] for p in poses])
     finally:
         reader.close()
-    return BagRecording(t, frames, A, dist, camera_frame, velocity_t, velocity, start)
+    return BagRecording(
+        t, frames, A, dist, camera_frame, velocity_t, velocity, start, body_R, body_x,
+        None if T is None else np.asarray(T, float),
+    )  # fmt: skip

@@ -22,8 +22,9 @@ The camera file is YAML or JSON, one mapping. Every problem takes the intrinsics
   own frame, m/s and rad/s (in Python, also a mapping of those two arrays).
 - `static_points` (Nath et al.): `known` and `unknown`, track indices; `known_features`,
   the known features' world positions (k, 3), m; `platform`, an NPZ file with the
-  platform's pose at the frames (`platform_R` (N, 3, 3), `platform_x` (N, 3)); the nominal
-  mounting `R_c_nominal`, `x_c_nominal` (the intrinsics are `A_nominal`).
+  platform's pose at the frames (`platform_R` (N, 3, 3), `platform_x` (N, 3); in Python,
+  also a mapping of those two arrays); the nominal mounting `R_c_nominal`, `x_c_nominal`
+  (the intrinsics are `A_nominal`).
 
 Every problem also takes `dist`, the lens' distortion coefficients (OpenCV's order, 4, 5,
 8, 12 or 14 of them, with the intrinsics they were calibrated with): the data file keeps
@@ -279,8 +280,12 @@ def _moving_point(t, pixels, A, camera, where, base) -> MovingPointData:
 def _static(t, pixels, A, camera, where, base) -> StaticPointsData:
     known = [_track(pixels, f, where) for f in _list(camera, "known", where)]
     unknown = [_track(pixels, f, where) for f in _list(camera, "unknown", where)]
-    platform_file = base / str(_need(camera, "platform", where))
-    platform = read_npz(platform_file)
+    given = _need(camera, "platform", where)
+    if isinstance(given, Mapping):  # in Python: the arrays themselves (`import_bag`)
+        platform_file, platform = where, given
+    else:
+        platform_file = base / str(given)
+        platform = read_npz(platform_file)
     for key in ("platform_R", "platform_x"):
         if key not in platform:
             raise DataFormatError(f"{platform_file}: no `{key}` (the platform's pose).")
