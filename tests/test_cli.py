@@ -127,6 +127,47 @@ def test_every_problems_run_figure_keeps_its_labels_on_the_canvas(problem, tmp_p
     assert len(list(out.rglob("run.svg"))) == 1
 
 
+@pytest.mark.slow  # two baselines compiled
+@pytest.mark.parametrize(
+    "problem, method, columns",
+    [
+        ("point_depth", "least_squares", ["depth_0", "depth_0_true", "depth_std_0"]),
+        ("homography", "dlt", ["H_11", "H_33"]),
+    ],
+)
+def test_a_baseline_whose_solution_is_its_own_module_writes_its_table(
+    problem, method, columns, tmp_path
+):
+    """`visjax run PROBLEM --method M` for a per-frame baseline (its solution a Module of
+    its own, without `outputs`): its fields are the table's columns, with the truth beside
+    them where the problem knows it (this crashed before: no `outputs`)."""
+    out = tmp_path / method
+    argv = ["run", problem, "--duration", "0.3", "--method", method, "--quiet"]
+    assert main([*argv, "--out", str(out)]) in (0, 1)
+    table = pd.read_parquet(out / "estimates.parquet")
+    assert set(columns) <= set(table.columns) and len(table) > 1, table.columns
+
+
+@pytest.mark.slow  # every method of a problem once more, for the recording
+def test_compare_writes_a_rerun_recording_of_each_method(tmp_path):
+    """`visjax compare --rerun`: read back with Rerun's own reader, each method's run of
+    the first seed is there, its estimate and the truth of every saved output column."""
+    pytest.importorskip("rerun")
+    from rerun.chunk import RrdReader
+
+    rrd = tmp_path / "cmp.rrd"
+    argv = ["compare", "point_depth", "--duration", "0.5", "--seeds", "1", "--noise", "0.5"]
+    assert main([*argv, "--quiet", "--rerun", str(rrd)]) in (0, 1)
+    rows = {}
+    for chunk in RrdReader(rrd).stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    problem = studies.problem("point_depth", duration=0.5)
+    for method in problem.methods:
+        mine = [e for e in rows if e.startswith(f"/point_depth/{method}/estimate/")]
+        assert mine and all(rows[e] > 1 for e in mine), (method, sorted(rows))
+    assert any(e.startswith("/point_depth/estimator/truth/") for e in rows)
+
+
 def test_geometry_command_writes_summary_and_figure(tmp_path, capsys):
     assert main(["geometry", "--scenes", "5", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out

@@ -23,13 +23,35 @@ from visjax.io import (
     validate_summary,
     write_summary as write,
 )
+from visjax.recording import MAX_TIMES
 
 
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce") / "results"
-    assert main(["reproduce", "--quick", "--quiet", "--format", "png,pdf", "--out", str(out)]) == 0
+    rrd = out.parent / "results.rrd"  # the Rerun recording, read back below
+    argv = ["reproduce", "--quick", "--quiet", "--format", "png,pdf", "--rerun", str(rrd)]
+    assert main([*argv, "--out", str(out)]) == 0
     return out
+
+
+@pytest.mark.slow
+def test_reproduce_writes_a_rerun_recording_of_every_reproduction(results):
+    """`reproduce --rerun`: read back with Rerun's own reader, each reproduction's arrays
+    with a time axis are entities of one row per time (decimated to `MAX_TIMES`), and the
+    testbed's video is there as at most 100 frames."""
+    pytest.importorskip("rerun")
+    from rerun.chunk import RrdReader
+
+    rows = {}
+    for chunk in RrdReader(results.parent / "results.rrd").stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    with np.load(results / "velocity" / "estimate.npz") as estimate:
+        n = len(estimate["t"][:: max(1, -(-len(estimate["t"]) // MAX_TIMES))])
+    assert rows["/velocity/estimate/v_hat_0"] == n
+    frames = [e for e in rows if e.startswith("/testbed/") and e.endswith("/frames")]
+    assert frames and all(0 < rows[e] <= 100 for e in frames), frames
+    assert {e.split("/")[1] for e in rows if e != "/__properties"} >= {"velocity", "testbed"}
 
 
 @pytest.mark.slow

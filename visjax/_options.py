@@ -305,10 +305,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = verb(sub, "run", "one method of a problem once", seeds=None, noise=0.0, grid=False)
     arg(run, "--method", None, None, "the method (default: the estimator)")
+    rerun = "also a Rerun recording of the run(s), FILE.rrd (pip install 'visjax[viz]')"
+    arg(run, "--rerun", None, None, rerun)
     help = "a problem's methods on identical noisy inputs"
     cmp = verb(sub, "compare", help, seeds=4, noise=None, grid=False)
     hours = "refuse, after the first seed, a comparison estimated to take longer (default 24)"
     arg(cmp, "--max-hours", positive, 24.0, hours)
+    arg(cmp, "--rerun", None, None, rerun)
     tune = "first tune every method, with the same --budget, on as many other seeds"
     arg(cmp, "--tune", help=tune, action="store_true")
     budget = f"objective evaluations per method for --tune (default {BUDGET})"
@@ -387,6 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("reproduce", help="every paper's main experiment and a summary")
     arg(r, "--quick", help=report.quick_help(), action="store_true")
+    arg(r, "--rerun", None, None, rerun)
     common(r, "everything (default results)")
     r.set_defaults(out="results")
     with_examples(parser, sub)

@@ -4,6 +4,7 @@ registered problem); its grammar is `visjax._options.build_parser`."""
 
 import argparse
 import dataclasses
+import importlib.util
 import inspect
 import os
 import sys
@@ -99,6 +100,11 @@ def _check(a) -> None:
         raise ValueError(f"bag {a.bag!r}: no such file or folder")
     if a.command == "import-bag" and (a.joint_states is None) != (a.robot is None):
         raise ValueError("--joint-states needs --robot, and --robot needs --joint-states")
+    if getattr(a, "rerun", None) is not None:  # before any work: the file and the package
+        if not a.rerun.endswith(".rrd"):
+            raise ValueError(f"--rerun {a.rerun!r}: a Rerun recording's file ends in .rrd")
+        if importlib.util.find_spec("rerun") is None:
+            raise ValueError("--rerun needs rerun-sdk: pip install 'visjax[viz]'")
     if getattr(a, "camera_from_body", None) is not None:
         io.pose_from_text(a.camera_from_body)  # seven numbers, or one line saying so
     for flag in ("tracks", "camera") if a.command == "data" else ():

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import recording
 from .frontend import import_bag, read_video, track_frames, track_tags
 from .io import DataFormatError, command_summary, data_from_tracks, save_tracks_csv
 from .studies import (
@@ -188,13 +189,15 @@ def quick_help() -> str:
 
 
 def reproduce(
-    out="results", quick: bool = False, quiet: bool = False, formats=("png",), only=None
-) -> list[dict]:
+    out="results", quick: bool = False, quiet: bool = False, formats=("png",), only=None,
+    rerun=None,
+) -> list[dict]:  # fmt: skip
     """Every registered reproduction (`visjax.studies.reproduction_names`, in order; `only`:
     those named) into its folder of `out`, then the summary table: `summary.json` (kind
     `reproduce`) and `summary.parquet`, one row per number (`visjax.studies.ROW_KEYS`: its
     `name`, `value`, `reference`, the reference's kind and the `unit`). `quick` runs each
-    with its shorter settings (`RegisteredReproduction.quick`). **Returns:** the rows."""
+    with its shorter settings (`RegisteredReproduction.quick`). `rerun`: also a Rerun
+    recording (`visjax.recording.log_reproduction`) at that path. **Returns:** the rows."""
     import pandas as pd
 
     started = time.perf_counter()
@@ -202,10 +205,12 @@ def reproduce(
     entries = [registered_reproduction(n) for n in names]
     settings = dict(out=str(out), quick=quick, formats=list(formats), reproductions=names)
     out = Path(out)
-    table = []
+    table, rec = [], None if rerun is None else recording.open_recording(rerun)
     for i, entry in enumerate(entries):
         print(("\n" if i else "") + f"== {entry.title} ==")
         table += entry.rows(out / entry.folder, quick=quick, quiet=quiet, formats=formats)
+        if rec is not None:
+            recording.log_reproduction(rec, out / entry.folder, entry.name)
     print("\n== summary ==")
     for row in table:
         value = "infeasible" if row["value"] is None else f"{row['value']:.4g}"

@@ -1,9 +1,9 @@
 """The commands `run|compare|sweep|tune PROBLEM` over any registered problem, and `merge`:
 each takes a `Request` (the command line's options), calls `visjax.studies`, prints, and
 writes `summary.json` (its schema in `visjax.io.SUMMARIES`), tables (Parquet and CSV) and
-figures into `out` when given. A problem with named variants (the thesis' experiment sets)
-runs variant by variant, a folder each, under a summary of kind `sets`. With a data file
-in one of the papers' formats, every summary reports `dropped_fraction`.
+figures into `out` when given (and a Rerun recording, `rerun`, for `run` and `compare`). A
+problem with variants (the thesis' sets) runs variant by variant, a folder each, under a
+summary of kind `sets`; with a paper's data file, every summary reports `dropped_fraction`.
 """
 
 import contextlib
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import studies
+from . import recording, studies
 from .io import command_summary, dropped_report, output_name, user_path
 from .plots import plot_comparison, plot_noise_study, plot_sweep, plot_tune_history, save_figure
 from .report import RunFailed
@@ -62,6 +62,7 @@ class Request:
     tune: bool = False  # compare: every method tuned first (`studies.compare_tuned`)
     budget: int = studies.BUDGET
     options: dict | None = None
+    rerun: str | None = None  # run, compare: a Rerun recording (`visjax.recording`)
 
     def __post_init__(self):
         if self.command == "sweep" and self.out is None and (self.resume or self.force or self.job):
@@ -90,8 +91,7 @@ class Request:
 
     def keys(self, held: bool = False):
         """The seeds `seed, ..., seed + seeds - 1`; `held`: the next `seeds` (held out)."""
-        first = self.seed + (self.seeds if held else 0)
-        return np.arange(first, first + self.seeds)
+        return np.arange(first := self.seed + (self.seeds if held else 0), first + self.seeds)
 
 
 def check_study(r: Request) -> list:
@@ -110,9 +110,12 @@ def _each(r: Request, items, one) -> dict:
     """`one(item, head, folder) -> (kind, body, folder)` for each `(tag, item)` (variants),
     its summary written; the one summary, or those by variant under one of kind `sets`."""
     started, settings, results = time.perf_counter(), r.settings(), {}
+    rec = None if r.rerun is None else recording.open_recording(r.rerun)
     for tag, item in items:
         folder = None if r.out is None else Path(r.out) / ("" if tag is None else output_name(tag))
         kind, body, folder = one(item, f"[{tag}] " if tag else "", folder)
+        if rec is not None:  # each method's run of the first seed, to look at
+            recording.log_request(rec, r, tag, item)
         results[tag] = command_summary(
             kind, body, settings=settings, seed=r.seed, started=started, out=folder
         )
@@ -281,9 +284,7 @@ def sweep_command(r: Request, built=None) -> dict:
                 raise
             done, n = studies.saved_runs(parts)
             again = "run the same command with --resume to continue"
-            sys.stderr.write(
-                f"visjax: interrupted: {done} of {n} runs are saved in {parts}; {again}\n"
-            )
+            sys.stderr.write(f"visjax: interrupted: {done} of {n} runs saved in {parts}; {again}\n")
             raise SystemExit(130) from None
         if job is not None:  # no summary in the folder (it would replace the other slices')
             merge = "when every shard is done: visjax merge DIR... --out OUT"
@@ -297,8 +298,7 @@ def sweep_command(r: Request, built=None) -> dict:
         if tune:
             adam = f"optax.adam({r.learning_rate}) on the log parameters, forward mode"
             result |= {"steps": r.steps, "optimiser": adam}
-            gain = result["improvement_over_paper"]
-            line = f"held-out improvement over the defaults: x {gain:.3g}"
+            line = f"held-out improvement on the defaults: x {result['improvement_over_paper']:.3g}"
         else:
             line = f"{result['failed_runs']} of {result['runs']} sweep runs failed"
         print("; ".join([f"{head}{line}", *(p.check_lines(result) if tune else ())]))

@@ -126,6 +126,7 @@ from ._sweep import (
     parse_grid as parse_grid,
     random_points as random_points,
     save_table as save_table,
+    solution_outputs as solution_outputs,
     solution_table as solution_table,
     summarise as summarise,
     sweep as sweep,

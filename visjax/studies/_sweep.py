@@ -134,18 +134,27 @@ def _columns(name: str, values: np.ndarray, names=None) -> dict[str, np.ndarray]
     return dict(zip(component_names(name, values.shape[1:], names), flat.T, strict=True))
 
 
+def solution_outputs(solution) -> dict:
+    """A solution's saved outputs by field name: a `Solution`'s `outputs`, or for a
+    method whose solution is its own Module (a per-frame baseline's: `ts`, its estimates,
+    `result`), its fields but `ts` and `result`."""
+    if hasattr(solution, "outputs"):
+        outputs = solution.outputs
+        return dict(outputs) if isinstance(outputs, dict) else vars(outputs)
+    return {k: v for k, v in vars(solution).items() if k not in ("ts", "result")}
+
+
 def solution_table(solution, problem=None, method: str | None = None) -> dict[str, np.ndarray]:
     """The saved outputs of one solution (`studies.solution`) as table columns: `t`, then
     each output field's components (the problem's `columns` names: `v_x`, ..., else
     `name_i`), and where the problem knows it (`AbstractProblem.truth_outputs`) the truth
     beside each as `<column>_true`; for a pandas `DataFrame`. Fields not saved at every
-    time are left out."""
+    time are left out. A method whose solution is its own Module (a per-frame baseline's,
+    without `outputs`) gives its fields (`solution_outputs`)."""
     table = {"t": np.asarray(solution.ts)}
     columns = {} if problem is None else problem.columns
     truth = {} if problem is None else problem.truth_outputs(method, solution)
-    outputs = solution.outputs
-    items = outputs.items() if isinstance(outputs, dict) else vars(outputs).items()
-    for name, v in items:
+    for name, v in solution_outputs(solution).items():
         if v is None or np.ndim(v) < 1:
             continue
         v = np.asarray(v)

@@ -183,7 +183,7 @@ class HomographyProblem(AbstractProblem):
 
     def truth_outputs(self, method, solution):
         """`H`: the true homography at the solution's times (the scene's samples)."""
-        outputs = getattr(solution, "outputs", None)
+        outputs = getattr(solution, "outputs", solution)  # a baseline's: its own fields
         if not hasattr(outputs, "H") or outputs.H.shape != self.scene.H.shape:
             return {}
         return {"H": self.scene.H}

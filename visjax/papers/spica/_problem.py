@@ -243,7 +243,7 @@ class PointDepthProblem(AbstractProblem):
     def truth_outputs(self, method, solution):
         """`depth`: each point's true depth at the solution's times (the scene's samples;
         none where the solution saved others)."""
-        outputs = getattr(solution, "outputs", None)
+        outputs = getattr(solution, "outputs", solution)  # a baseline's: its own fields
         truth = self._truth()
         if not hasattr(outputs, "depth") or outputs.depth.shape != truth.shape:
             return {}
