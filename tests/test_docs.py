@@ -53,6 +53,9 @@ KEY_FIGURES = {
     "tables": "tables",
     "geometry": "geometry",
     "extending": "point-depth",
+    "errors": "errors",
+    "command-line": "comparison",
+    "cluster": "sweep",
 }
 # page -> API entries its prose links to (by docs/_hooks/api_links.py)
 API_LINKS = {
