@@ -56,7 +56,10 @@ KEY_FIGURES = {
     "errors": "errors",
     "command-line": "comparison",
     "cluster": "sweep",
+    "outputs": "tables",
 }
+# page -> the figure drawn from the repository's records (docs/_hooks/reference_figures.py)
+RECORD_FIGURES = {"performance": "performance", "gpu": "float32", "architecture": "layers"}
 # page -> API entries its prose links to (by docs/_hooks/api_links.py)
 API_LINKS = {
     "runner": ["visjax.estimators.run", "visjax.estimators.SaveAt"],
@@ -172,6 +175,16 @@ def test_site_builds_strict_with_every_public_name(site):
         png = (out / "figures" / f"{name}.png").read_bytes()
         assert png.startswith(b"\x89PNG") and len(png) > 10_000, (name, len(png))
         assert png in drawn, name
+    for page, name in RECORD_FIGURES.items():
+        html = (out / page / "index.html").read_text()
+        assert re.search(rf'<img [^>]*src="(\.\./)+figures/{name}\.png"', html), (page, name)
+        assert (out / "figures" / f"{name}.png").read_bytes().startswith(b"\x89PNG"), name
+    # every guide of the nav shows a figure
+    nav = yaml.safe_load((ROOT / "mkdocs.yml").read_text().replace("!!python", "#"))["nav"]
+    guides = [p.removesuffix(".md") for g in nav if "Guides" in g for d in g["Guides"]
+              for p in d.values()]  # fmt: skip
+    shown = set(KEY_FIGURES) | set(RECORD_FIGURES)
+    assert set(guides) <= shown, sorted(set(guides) - shown)
     # the names a page writes as code link to their API entries, first use on each page
     for page, names in API_LINKS.items():
         html = (out / page / "index.html").read_text()
