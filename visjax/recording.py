@@ -1,4 +1,4 @@
-"""Recordings to look at: a run logged to a Rerun file (`.rrd`), to scrub through in the
+r"""Recordings to look at: a run logged to a Rerun file (`.rrd`), to scrub through in the
 Rerun viewer (`rerun FILE.rrd`), with `rerun-sdk` (the optional extra `visjax[viz]`; the
 base install does not need it). The commands' `--rerun FILE.rrd` (`run`, `compare`,
 `reproduce`) write one.
@@ -12,12 +12,19 @@ What is logged, on the timeline `t` (seconds):
 - `PREFIX/METHOD/points` and `PREFIX/truth_points`: the 3-D points of the first output
   whose components are x, y, z and whose truth the problem knows (a moving point's
   position, the static features), estimated and true, at each saved time;
+- `PREFIX/METHOD/error/H`: for a homography `H` (N, 3, 3) with its truth, Hamel et al.'s
+  error $\|\hat H H^{-1} - I\|_F$ over time;
 - `PREFIX/pixels`: the pixels the methods see (a problem's `clean` or `pixels` array of one
   row per time of its `ts`), as 2-D points, one entity per time;
+- `PREFIX/camera_path` and `PREFIX/world/...`: for a camera on a moving platform (a problem
+  with the platform's poses `R_b`, `x_b` and the camera's nominal mounting `x_c_nominal`,
+  Nath et al.'s), the camera's path in the world as a line strip and its position over
+  time, the known features (`omega_c`) and the unknown ones' truth;
 - `PREFIX/ARRAY/KEY`: for `reproduce`, each job's arrays with a time axis `t`, and
   `PREFIX/frames` its image frames, where it has any.
 """
 
+import contextlib
 from pathlib import Path
 
 import numpy as np
@@ -82,6 +89,12 @@ def log_solution(rec, prefix: str, problem, method: str, solution) -> list[str]:
         logged.append(entity)
     outputs = studies.solution_outputs(solution)
     truth = problem.truth_outputs(method, solution)
+    H, H_true = outputs.get("H"), truth.get("H")
+    if H is not None and H_true is not None and np.shape(H) == np.shape(H_true) == (len(t), 3, 3):
+        eye = np.eye(3)
+        error = np.linalg.norm(np.asarray(H) @ np.linalg.inv(np.asarray(H_true)) - eye, axis=(1, 2))
+        _scalars(rec, f"{prefix}/{method}/error/H", t, error)
+        logged.append(f"{prefix}/{method}/error/H")
     for name, v in outputs.items():  # the first output of 3-D points the truth knows
         if v is None or np.ndim(v) < 2 or np.shape(v)[-1] != 3 or np.shape(v)[0] != len(t):
             continue
@@ -106,9 +119,30 @@ def log_problem(rec, prefix: str, problem, methods, seed: int = 0) -> list[str]:
             _points(rec, f"{prefix}/pixels", ts, pixels, 2)
             logged.append(f"{prefix}/pixels")
             break
+    logged += _log_platform(rec, prefix, problem)
     for method in methods:
         sol = studies.solution(problem, None, seed, method=method)
         logged += log_solution(rec, prefix, problem, method, sol)
+    return logged
+
+
+def _log_platform(rec, prefix: str, problem) -> list[str]:
+    """The camera's path and the world's points of a camera on a moving platform."""
+    import rerun as rr
+
+    parts = [getattr(problem, k, None) for k in ("ts", "R_b", "x_b", "x_c_nominal")]
+    if any(p is None for p in parts):
+        return []
+    ts, R_b, x_b, x_c = (np.asarray(p, float) for p in parts)
+    path = x_b + np.einsum("nij,j->ni", R_b, x_c)  # the camera's centre in the world
+    rec.log(f"{prefix}/camera_path", rr.LineStrips3D([path]), static=True)
+    _points(rec, f"{prefix}/camera", ts, path, 3)
+    logged = [f"{prefix}/camera_path", f"{prefix}/camera"]
+    for name, attr in (("known", "omega_c"), ("unknown_true", "truth")):
+        points = getattr(problem, attr, None)
+        if points is not None:
+            rec.log(f"{prefix}/world/{name}", rr.Points3D(np.asarray(points, float)), static=True)
+            logged.append(f"{prefix}/world/{name}")
     return logged
 
 
@@ -141,6 +175,21 @@ def log_arrays(rec, prefix: str, arrays) -> list[str]:
                 _scalars(rec, entity, t, flat[:, i])
                 logged.append(entity)
     return logged
+
+
+@contextlib.contextmanager
+def request_log(request):
+    """For a command (`visjax.verbs`): `log(tag, problem)`, which logs the problem's runs
+    (`log_request`) to `request.rerun`, or does nothing without one; the recording is
+    closed (its file finished) on leaving."""
+    if request.rerun is None:
+        yield lambda tag, problem: None
+        return
+    rec = open_recording(request.rerun)
+    try:
+        yield lambda tag, problem: log_request(rec, request, tag, problem)
+    finally:
+        rec.disconnect()
 
 
 def log_request(rec, request, tag, problem) -> list[str]:

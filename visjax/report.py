@@ -211,6 +211,8 @@ def reproduce(
         table += entry.rows(out / entry.folder, quick=quick, quiet=quiet, formats=formats)
         if rec is not None:
             recording.log_reproduction(rec, out / entry.folder, entry.name)
+    if rec is not None:
+        rec.disconnect()  # the recording's file finished
     print("\n== summary ==")
     for row in table:
         value = "infeasible" if row["value"] is None else f"{row['value']:.4g}"

@@ -110,15 +110,14 @@ def _each(r: Request, items, one) -> dict:
     """`one(item, head, folder) -> (kind, body, folder)` for each `(tag, item)` (variants),
     its summary written; the one summary, or those by variant under one of kind `sets`."""
     started, settings, results = time.perf_counter(), r.settings(), {}
-    rec = None if r.rerun is None else recording.open_recording(r.rerun)
-    for tag, item in items:
-        folder = None if r.out is None else Path(r.out) / ("" if tag is None else output_name(tag))
-        kind, body, folder = one(item, f"[{tag}] " if tag else "", folder)
-        if rec is not None:  # each method's run of the first seed, to look at
-            recording.log_request(rec, r, tag, item)
-        results[tag] = command_summary(
-            kind, body, settings=settings, seed=r.seed, started=started, out=folder
-        )
+    with recording.request_log(r) as log:  # --rerun: each method's run of the first seed
+        for tag, item in items:
+            folder = None if r.out is None else Path(r.out) / (output_name(tag) if tag else "")
+            kind, body, folder = one(item, f"[{tag}] " if tag else "", folder)
+            log(tag, item)
+            results[tag] = command_summary(
+                kind, body, settings=settings, seed=r.seed, started=started, out=folder
+            )
     summary = results.get(None) if list(results) == [None] else command_summary(
         "sets", {"sets": results}, settings=settings, seed=r.seed, started=started, out=r.out
     )  # fmt: skip
