@@ -1130,9 +1130,64 @@ def fuzz_sl3(n, seed, dtype):
     return out
 
 
+def fuzz_distortion(n, seed, dtype):
+    """`distort_pixels` against OpenCV's `cv2.projectPoints` (the same lens model, one call
+    per element), `undistort_pixels` by the round trip; near-degenerate: strong barrel
+    distortion out to the image's corners, where a pixel may have no point (NaN, the
+    documented answer); invalid: non-finite pixels or coefficients (NaN out)."""
+    import cv2
+    import numpy as np
+
+    from visjax.geometry import distort_pixels, undistort_pixels
+
+    rng = np.random.default_rng(seed)
+    A1 = np.array([[800.0, 0.0, 320.0], [0.0, 790.0, 240.0], [0, 0, 1]])
+    out = {}
+    tol = 1e-9 if dtype == "float64" else 2e-4  # relative to the pixel's size
+    for kind in KINDS:
+        p = np.c_[rng.uniform(0, 640, n), rng.uniform(0, 480, n)]
+        dist = np.c_[rng.uniform(-0.3, 0.1, n), rng.uniform(-0.05, 0.05, (n, 3)) * [1, 0.02, 0.02],
+                     rng.uniform(-0.01, 0.01, n)]  # fmt: skip
+        if kind == "near_degenerate":
+            dist[:, 0] = rng.uniform(-0.45, -0.35, n)  # strong barrel, out to the corners
+            p = np.c_[rng.choice([0.0, 640.0], n), rng.choice([0.0, 480.0], n)] + rng.normal(
+                0, 5, (n, 2)
+            )
+        elif kind == "invalid":
+            which = rng.integers(0, 2, n)
+            p[which == 0, rng.integers(0, 2)] = rng.choice([np.nan, np.inf], np.sum(which == 0))
+            dist[which == 1, 0] = np.nan
+        A = np.tile(A1, (n, 1, 1))
+        cast = lambda x: np.asarray(x, dtype)  # noqa: E731
+        d = np.asarray(_vm(distort_pixels)(cast(p), cast(A), cast(dist)), float)
+        u = np.asarray(_vm(undistort_pixels)(cast(d), cast(A), cast(dist)), float)
+        if kind == "invalid":
+            for name, got in (("distort_pixels", d), ("undistort_pixels", u)):
+                c = _counts()
+                _nan_in_nan_out(c, got)
+                out.setdefault(name, {})[kind] = c
+            continue
+        truth = np.stack([
+            cv2.projectPoints(np.linalg.solve(A1, [*pk, 1.0])[None], np.zeros(3), np.zeros(3), A1,
+                              dk)[0][0, 0] for pk, dk in zip(p, dist)
+        ])  # fmt: skip
+        scale = np.maximum(np.max(np.abs(truth), 1), 1.0)
+        with np.errstate(all="ignore"):
+            c = _counts()
+            _classify(np.ones(n, bool), np.all(np.isfinite(d), 1),
+                      np.max(np.abs(d - truth), 1) / scale, tol, c)  # fmt: skip
+            out.setdefault("distort_pixels", {})[kind] = c
+            found = np.all(np.isfinite(u), 1)  # NaN: no point gives the pixel (documented)
+            c = _counts()
+            _classify(found, found, np.max(np.abs(u - p), 1) / scale, tol, c)
+            out.setdefault("undistort_pixels", {})[kind] = c
+    return out
+
+
 PARTS = (
     "fuzz_reconstruction",
     "fuzz_camera",
+    "fuzz_distortion",
     "fuzz_so3",
     "fuzz_decomposition",
     "fuzz_so3_helpers",

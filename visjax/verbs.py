@@ -282,8 +282,8 @@ def sweep_command(r: Request, built=None) -> dict:
             if parts is None:
                 raise
             done, n = studies.saved_runs(parts)
-            again = "run the same command with --resume to continue"
-            sys.stderr.write(f"visjax: interrupted: {done} of {n} runs saved in {parts}; {again}\n")
+            saved = f"visjax: interrupted: {done} of {n} runs are saved in {parts}"
+            sys.stderr.write(f"{saved}; run the same command with --resume to continue\n")
             raise SystemExit(130) from None
         if job is not None:  # no summary in the folder (it would replace the other slices')
             merge = "when every shard is done: visjax merge DIR... --out OUT"
@@ -297,7 +297,8 @@ def sweep_command(r: Request, built=None) -> dict:
         if tune:
             adam = f"optax.adam({r.learning_rate}) on the log parameters, forward mode"
             result |= {"steps": r.steps, "optimiser": adam}
-            line = f"held-out improvement on the defaults: x {result['improvement_over_paper']:.3g}"
+            gain = result["improvement_over_paper"]
+            line = f"held-out improvement over the defaults: x {gain:.3g}"
         else:
             line = f"{result['failed_runs']} of {result['runs']} sweep runs failed"
         print("; ".join([f"{head}{line}", *(p.check_lines(result) if tune else ())]))
