@@ -27,10 +27,11 @@ or a distortion model visjax cannot read are each one `DataFormatError` naming t
 from dataclasses import dataclass
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from .._util import did_you_mean
-from ..geometry import DISTORTION_LENGTHS
+from ..geometry import DISTORTION_LENGTHS, so3_exp, so3_log
 from ..kinematics import TwoLinkArm, puma560
 from ._formats import DataFormatError
 
@@ -85,8 +86,10 @@ class BagRecording:
         k = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 2)
         s = ((t - ts[k]) / (ts[k + 1] - ts[k]))[:, None]
         x = (1 - s) * self.body_x[k] + s * self.body_x[k + 1]
-        R = np.stack([_geodesic(self.body_R[i], self.body_R[i + 1], float(f))
-                      for i, f in zip(k, s[:, 0])])  # fmt: skip
+        R0, R1 = self.body_R[k], self.body_R[k + 1]
+        with jax.enable_x64(True):  # along the relative rotation's axis (geometry's SO(3))
+            turn = jax.vmap(lambda D: so3_log(D).omega)(np.swapaxes(R0, 1, 2) @ R1)
+            R = R0 @ np.asarray(jax.vmap(so3_exp)(s * np.asarray(turn)))
         return R, x
 
 
@@ -215,18 +218,6 @@ def _static_transform(reader, parent: str, child: str) -> np.ndarray | None:
     return None
 
 
-def _geodesic(R0, R1, s: float) -> np.ndarray:
-    """The rotation a fraction `s` of the way from `R0` to `R1` (about their relative axis)."""
-    D = R0.T @ R1
-    angle = np.arccos(np.clip((np.trace(D) - 1) / 2, -1.0, 1.0))
-    if angle < 1e-12:
-        return R0
-    axis = np.array([D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]]) / (2 * np.sin(angle))
-    W = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    a = s * angle
-    return R0 @ (np.eye(3) + np.sin(a) * W + (1 - np.cos(a)) * W @ W)
-
-
 def _camera_twist(v_b: np.ndarray, T_body_camera: np.ndarray) -> np.ndarray:
     """A body's twist (M, 6), linear first, in the body frame, as the twist of a camera
     rigidly mounted at `T_body_camera`, in the camera frame:
@@ -248,15 +239,15 @@ def _joint_twists(msgs, robot, bag, topic) -> np.ndarray:
         qdot = np.stack([r[:n] for r in rates])
     else:
         qdot = np.gradient(q, np.array([s for s, _ in msgs], np.int64) / 1e9, axis=0)
-    if isinstance(robot, TwoLinkArm):  # the end link turns by q1 + q2 about the base z
-        out = []
-        for qk, rk in zip(q, qdot):
-            v = np.asarray(robot.jacobian(qk)) @ rk
-            c, s_ = np.cos(qk.sum()), np.sin(qk.sum())
-            out.append([c * v[0] + s_ * v[1], -s_ * v[0] + c * v[1], 0.0, 0.0, 0.0, rk.sum()])
-        return np.array(out)
-    chain = puma560() if isinstance(robot, str) else robot
-    return np.stack([np.asarray(chain.tool_twist(qk, rk, local=True)) for qk, rk in zip(q, qdot)])
+    with jax.enable_x64(True):  # every sample at once, in the recording's precision
+        if isinstance(robot, TwoLinkArm):  # the end link turns by q1 + q2 about the base z
+            v = np.einsum("mij,mj->mi", np.asarray(jax.vmap(robot.jacobian)(q)), qdot)
+            c, s_ = np.cos(q.sum(1)), np.sin(q.sum(1))
+            zero = np.zeros(len(q))
+            return np.stack([c * v[:, 0] + s_ * v[:, 1], -s_ * v[:, 0] + c * v[:, 1], zero,
+                             zero, zero, qdot.sum(1)], axis=1)  # fmt: skip
+        chain = puma560() if isinstance(robot, str) else robot
+        return np.asarray(jax.vmap(lambda a, b: chain.tool_twist(a, b, local=True))(q, qdot))
 
 
 def read_bag(
