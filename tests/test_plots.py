@@ -174,6 +174,50 @@ def _transient(**kw):
     return plots.plot_transient(t, measured, ideal, **kw)
 
 
+def _budget_table(failed=True):
+    """A synthetic error budget: two sets, no source, two sources, all, one other reading
+    (which did not succeed in the second set when `failed`)."""
+    configs = [("none", "stated"), ("a", "stated"), ("b", "stated"), ("all", "stated"),
+               ("a", "other")]  # fmt: skip
+    rows = []
+    for j, set_name in enumerate(("I.1", "II.1")):
+        for k, (source, reading) in enumerate(configs):
+            bad = failed and j == 1 and k == 4
+            rows += [
+                {"set": set_name, "sources": source, "reading": reading, "axis": axis,
+                 "rms_m": np.nan if bad else 1e-3 * (1 + k + i + 2 * j),
+                 "thesis_rms_m": 0.01 * (i + 1), "tracking_rms_px": 0.03,
+                 "result": "diverged" if bad else "successful"}
+                for i, axis in enumerate("xyz")
+            ]  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def _error_budget(**kw):
+    return plots.plot_error_budget(_budget_table(), **kw)
+
+
+def test_error_budget_bars_are_the_tables_values():
+    """Each bar is its row's RMS in mm (a failed run: no bar, its result written instead);
+    the thesis' RMS of each axis a dashed line of that axis' colour."""
+    table = _budget_table()
+    fig = _error_budget()
+    try:
+        for ax, set_name in zip(fig.axes, ("I.1", "II.1"), strict=True):
+            part = table[table["set"] == set_name]
+            widths = sorted(1e3 * part["rms_m"].dropna())
+            bars = sorted(p.get_width() for p in ax.patches if np.isfinite(p.get_width()))
+            np.testing.assert_allclose(bars, widths, rtol=1e-12)
+            levels = sorted(ln.get_xdata()[0] for ln in ax.get_lines())
+            np.testing.assert_allclose(levels, [10.0, 20.0, 30.0])
+        texts = [t.get_text().strip() for t in fig.axes[1].texts]
+        assert texts == ["diverged"] and not fig.axes[0].texts
+        labels = [t.get_text() for t in fig.axes[0].get_yticklabels()]
+        assert labels == ["none", "a", "b", "all", "a (other)"]
+    finally:
+        plt.close(fig)
+
+
 def _noise_study(**kw):
     by = [studies.Comparison(_records()).statistics("err", resamples=200, seed=i) for i in range(3)]
     stats = {"metric": "err", "noise_levels": [0.1, 0.5, 1.0], "by_noise": by}
@@ -196,6 +240,7 @@ FIGURES = {
     "comparison": _comparison,
     "sweep": _sweep,
     "tune_history": _tune,
+    "error_budget": _error_budget,
 }
 FUNCTIONS = (  # one case per plot function
     "transient",
@@ -210,6 +255,7 @@ FUNCTIONS = (  # one case per plot function
     "comparison",
     "sweep",
     "tune_history",
+    "error_budget",
 )
 TRUTH_FIGURES = ("velocity", "structure", "testbed", "euclidean", "feature_estimates")
 SEED_FIGURES = {
@@ -237,6 +283,7 @@ def test_every_plot_function_is_exercised():
         "plot_tune_history",
         "plot_transient",
         "plot_noise_study",
+        "plot_error_budget",
     }
     assert public == used
 
@@ -262,10 +309,10 @@ def _shows_data(ax):
     return bool(lines or ax.collections or ax.images)
 
 
-def _categorical_x(ax):
-    """x ticks at fixed places labelled with names (not numbers)."""
-    names = [t.get_text() for t in ax.get_xticklabels()]
-    return isinstance(ax.xaxis.get_major_locator(), FixedLocator) and any(
+def _categorical(axis):
+    """Ticks at fixed places labelled with names (not numbers): an `ax.xaxis` or `ax.yaxis`."""
+    names = [t.get_text() for t in axis.get_ticklabels()]
+    return isinstance(axis.get_major_locator(), FixedLocator) and any(
         re.search("[A-Za-z]", n) and not n.startswith("$") for n in names
     )
 
@@ -305,8 +352,9 @@ def _check_paper_figure(fig, name):
     shown = [ax for ax in fig.axes if _shows_data(ax)]
     assert shown
     for ax in shown:
-        assert UNIT.search(ax.get_ylabel()), (name, ax.get_ylabel())
-        if _categorical_x(ax):
+        names_y = any(_categorical(a.yaxis) for a in ax.get_shared_y_axes().get_siblings(ax))
+        assert names_y or UNIT.search(ax.get_ylabel()), (name, ax.get_ylabel())
+        if _categorical(ax.xaxis):
             continue  # method names: no quantity on x
         assert UNIT.search(_x_label_with_unit(ax)), (name, ax.get_title())
     for text in fig.findobj(Text):

@@ -384,7 +384,7 @@ def build_parser() -> argparse.ArgumentParser:
     arg(tb, "--units", None, "cm", units, choices=("cm", "m"))
     arg(tb, "--duration", positive, 30.0, "seconds per set (default 30)")
     arg(tb, "--no-video", help="no MP4 of the rendered frames", action="store_false", dest="video")
-    no_studies = "skip the camera matrix (Tables 5-1/5-2) and the v_py sensitivity"
+    no_studies = "skip the camera matrix (Tables 5-1/5-2), the v_py sensitivity, the error budget"
     arg(tb, "--no-studies", help=no_studies, action="store_false", dest="studies")
     common(tb, "tables, estimates, figures and videos", False, "the texture's seed (0)")
 

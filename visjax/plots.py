@@ -620,6 +620,48 @@ def plot_testbed(run, *, title=None, path=None, max_points=2000, formats=("png",
 # Nath et al.: Euclidean positions from an uncalibrated moving camera
 
 
+def plot_error_budget(table, *, title=None, path=None, formats=("png",)):
+    """The testbed twin's error budget (`visjax.papers.jang.testbed_error_budget`): per set,
+    one row of bars per configuration (no source, each source alone, all together, the
+    other readings), the RMS of x, y, z in colour, and the thesis' measured RMS of each
+    axis as a dashed line of the same colour. A run that did not succeed has no bar: its
+    row says its result instead.
+
+    **Arguments:** `table` the budget's `pandas.DataFrame` (`set`, `sources`, `reading`,
+    `axis`, `rms_m`, `thesis_rms_m`, `result`); `title`, `path`, `formats` as in the
+    module's docstring. **Returns:** the `Figure` (double column)."""
+    formats = figure_formats(formats)
+    sets = list(dict.fromkeys(table["set"]))
+    configs = list(dict.fromkeys(zip(table["sources"], table["reading"], strict=True)))
+    labels = [s if r == "stated" else f"{s} ({r})" for s, r in configs]
+    plt = _pyplot(path)
+    with _style():
+        fig, axes = _subplots(plt, 1, len(sets), DOUBLE_COLUMN, 1.0 + 0.26 * len(configs),
+                              sharey=True)  # fmt: skip
+        y = np.arange(len(configs))
+        for ax, set_name in zip(axes[0], sets, strict=True):
+            part = table[table["set"] == set_name]
+            for i, axis in enumerate("xyz"):
+                rows = part[part["axis"] == axis].set_index(["sources", "reading"])
+                rms = np.array([float(rows.loc[c, "rms_m"]) if c in rows.index else np.nan
+                                for c in configs])  # fmt: skip
+                ax.barh(y + (i - 1) * 0.27, 1e3 * rms, height=0.27, color=f"C{i}", gid="error")
+                thesis = float(rows["thesis_rms_m"].iloc[0])
+                ax.axvline(1e3 * thesis, color=f"C{i}", ls="--", lw=0.8, gid="measured")
+            failed = part.drop_duplicates(["sources", "reading"]).set_index(["sources", "reading"])
+            for k, c in enumerate(configs):
+                if c in failed.index and failed.loc[c, "result"] != "successful":
+                    ax.text(0.0, k, f" {failed.loc[c, 'result']}", va="center")
+            ax.set_title(f"set {set_name}")
+            ax.set_xlabel("RMS error, second half [mm]")
+        axes[0, 0].set_yticks(y, labels)
+        axes[0, 0].invert_yaxis()
+        handles = [_proxy(color=f"C{i}", lw=4, label="xyz"[i]) for i in range(3)]
+        handles.append(_proxy(color="0.3", ls="--", lw=0.8, label="the thesis' measured RMS"))
+        _legend(fig, handles, ncol=4)
+        return _finish(fig, title, path, formats)
+
+
 def _feature_errors(est, truth):
     """Position error norm per feature [m], (..., N, n), for `est` (..., N, n, 3) and the
     truth (n, 3) or (S, n, 3)."""

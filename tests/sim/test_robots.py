@@ -94,6 +94,13 @@ def test_encoder_twist_and_quantisation(q_start):
     assert np.abs(qq - np.asarray(jt.q)).max() <= res / 2 + 1e-15
     with pytest.raises(ValueError, match="resolution"):
         quantise(jt.q, 0.0)
+    # one resolution per joint: each column rounded to its own
+    per_joint = res * np.arange(1.0, 7.0)
+    qj = np.asarray(quantise(jt.q, per_joint))
+    for j in range(6):
+        np.testing.assert_array_equal(qj[:, j], np.asarray(quantise(jt.q[:, j], per_joint[j])))
+    with pytest.raises(ValueError, match="resolution"):
+        quantise(jt.q, per_joint * np.r_[1, 1, 1, 1, 1, -1])
     with pytest.raises(ValueError, match="window"):
         encoder_twist(CHAIN, jt.q, rate, resolution=res, window=0)
     # under jit and grad: the encoder twist is differentiable in the joint angles

@@ -410,6 +410,16 @@ TABLES = {
         "feasible": "bool",
         "result": "str",
     },
+    "testbed/error_budget.parquet": {
+        "set": "str (I.1, II.1: visjax.papers.jang.BUDGET_SETS)",
+        "sources": "str (none, one of visjax.papers.jang.ERROR_SOURCES, or all)",
+        "reading": "str (stated: the source's stated value; else its other reading's label)",
+        "axis": "str (x, y, z)",
+        "rms_m": "float (NaN: the run did not succeed)",
+        "thesis_rms_m": "float (Tables 5-3/5-4)",
+        "tracking_rms_px": "float",
+        "result": "str",
+    },
     "compare/tuning.parquet": {
         "method": "str",
         "evaluation": "int (0: the defaults)",

@@ -14,6 +14,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._results import RESULTS
@@ -132,11 +133,13 @@ def follow_tool_twist(
     return JointTrajectory(ts=ts, q=q, sigma_min=sigma, result=result, failed_sample=first)
 
 
-def quantise(q: Float[ArrayLike, "..."], resolution: float) -> Float[Array, "..."]:
-    """Encoder readings: `q` rounded to a multiple of `resolution` (rad per count)."""
-    if not resolution > 0:
+def quantise(q: Float[ArrayLike, "..."], resolution) -> Float[Array, "..."]:
+    """Encoder readings: `q` rounded to a multiple of `resolution` (rad per count): one
+    number, or one per joint (broadcast along `q`'s last axis)."""
+    if not np.all(np.asarray(resolution) > 0):
         raise ValueError(f"`resolution` must be positive; got {resolution!r}.")
     q = as_float(q)
+    resolution = jnp.broadcast_to(jnp.asarray(resolution, q.dtype), q.shape)
     return jnp.round(q / resolution) * resolution
 
 
@@ -145,17 +148,17 @@ def encoder_twist(
     q: Float[ArrayLike, "N 6"],
     rate_hz: float,
     *,
-    resolution: float,
+    resolution,
     window: int,
     local: bool = True,
 ) -> Float[Array, "N 6"]:
     """The tool twist a controller computes from its joint encoders, at every sample.
 
-    The readings are `quantise(q, resolution)`; the joint rates are their backward
-    difference over `window` samples, $(\\tilde q_k - \\tilde q_{k-w}) / (w / f)$ (the mean
-    rate over the last `window` samples: a delay of half the window); the twist is eq.
-    (4.5) at $\\tilde q_k$. The first `window` samples use the first reading as the
-    earlier one (rate 0 at sample 0).
+    The readings are `quantise(q, resolution)` (rad per count: one number or one per
+    joint); the joint rates are their backward difference over `window` samples,
+    $(\\tilde q_k - \\tilde q_{k-w}) / (w / f)$ (the mean rate over the last `window`
+    samples: a delay of half the window); the twist is eq. (4.5) at $\\tilde q_k$. The
+    first `window` samples use the first reading as the earlier one (rate 0 at sample 0).
 
     **Returns:** (N, 6) $[V; \\omega]$ of the tool point, in the tool frame's basis
     (`local=True`) or in $F$.
