@@ -78,13 +78,14 @@ class TestbedRun:
       forward kinematics; `estimate` (N, 3) the UIO from tracked pixels; `estimate_ideal`
       (N, 3) the UIO from the exact projections of the marker's centre.
     - `frame_ts` (F,); `frame_index` (F,) their 1 kHz samples; `pixels` (F, 2) the tracked
-      marker centre (NaN where lost); `pixels_true` (F, 2) its exact projection;
+      marker centre (NaN where lost); `pixels_true` (F, 2) its exact pinhole projection;
       `velocity_true` (F, 6), `velocity_measured` (F, 6): the camera's $[v_c, \\omega]$
-      (m/s, rad/s, camera frame), exact and from the encoders.
+      (m/s, rad/s, camera frame), exact and from the encoders (`time_offset_s` earlier).
     - `q_puma` (N, 6), `q_arm` (N, 2) or `None`: the robots' joint angles.
     - `rms` (3,) the RMS error over the second half at 1 kHz; `rms_frames` (3,) at the
       camera samples only; `rms_ideal` (3,) at 1 kHz from ideal pixels; `tracking_rms_px`
-      the tracked centre's RMS distance to its projection (px).
+      the tracked centre's RMS distance to its projection (px; through the lens, with
+      `dist`: the tracker's error alone).
     - `result` the UIO's result name (from tracked pixels; the RMS fields are NaN when a
       run did not succeed, e.g. `diverged`: the depth estimate became negative), or
       `not_run` (infeasible), `marker_never_found`, `marker_found_late` (first found in
