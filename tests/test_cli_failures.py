@@ -611,3 +611,22 @@ def test_a_study_command_builds_its_problem_once(capsys):
         builds.clear()
         assert main(argv) == 0, capsys.readouterr().err
         assert builds == [0.1], argv
+
+
+def test_an_optional_extra_missing_is_one_line_naming_it(tmp_path, monkeypatch, capsys):
+    """Without `rosbags` or `rerun-sdk` (the extras `visjax[ros]`, `visjax[viz]`), the
+    commands that need them refuse in one line naming the extra, before any work."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+    missing = {"rosbags", "rerun"}
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name in missing else real(name, *a)
+    )
+    bag = tmp_path / "a.bag"
+    bag.write_bytes(b"")
+    argv = ["import-bag", str(bag), "--problem", "velocity", "--image-topic", "/i",
+            "--camera-info", "/c", "--twist", "/t", "--out", str(tmp_path / "d.npz")]  # fmt: skip
+    assert "pip install 'visjax[ros]'" in _refused(argv, capsys)
+    argv = ["run", "velocity", "--rerun", str(tmp_path / "a.rrd"), "--out", str(tmp_path / "r")]
+    assert "pip install 'visjax[viz]'" in _refused(argv, capsys)

@@ -98,6 +98,8 @@ def _check(a) -> None:
         raise ValueError("--tags finds the tags in every frame: no --detector or --planar")
     if a.command == "import-bag" and not Path(a.bag).exists():
         raise ValueError(f"bag {a.bag!r}: no such file or folder")
+    if a.command == "import-bag" and importlib.util.find_spec("rosbags") is None:
+        raise ValueError("import-bag needs rosbags: pip install 'visjax[ros]'")
     if a.command == "import-bag" and (a.joint_states is None) != (a.robot is None):
         raise ValueError("--joint-states needs --robot, and --robot needs --joint-states")
     if getattr(a, "rerun", None) is not None:  # before any work: the file and the package
