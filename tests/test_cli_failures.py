@@ -619,7 +619,7 @@ def test_an_optional_extra_missing_is_one_line_naming_it(tmp_path, monkeypatch, 
     import importlib.util
 
     real = importlib.util.find_spec
-    missing = {"rosbags", "rerun"}
+    missing = {"rosbags", "rosbags.highlevel", "rerun"}
     monkeypatch.setattr(
         importlib.util, "find_spec", lambda name, *a: None if name in missing else real(name, *a)
     )

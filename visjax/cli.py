@@ -26,6 +26,14 @@ _STUDIES = ("run", "compare", "sweep", "tune")  # built, checked, sized: `verbs.
 _VERBS = {"run": "run", "compare": "compare", "sweep": "sweep", "tune": "sweep", "merge": "merge"}
 
 
+def _installed(module: str) -> bool:
+    """Whether `module` can be imported (its parent package too), without importing it."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
 def _request(a) -> verbs.Request:
     """A verb's options as a `verbs.Request` (`--set` is `variants`, `--format` `formats`);
     a paper's command on a data file is `run PROBLEM`. **Raises:** `ValueError` for
@@ -98,14 +106,14 @@ def _check(a) -> None:
         raise ValueError("--tags finds the tags in every frame: no --detector or --planar")
     if a.command == "import-bag" and not Path(a.bag).exists():
         raise ValueError(f"bag {a.bag!r}: no such file or folder")
-    if a.command == "import-bag" and importlib.util.find_spec("rosbags") is None:
+    if a.command == "import-bag" and not _installed("rosbags.highlevel"):
         raise ValueError("import-bag needs rosbags: pip install 'visjax[ros]'")
     if a.command == "import-bag" and (a.joint_states is None) != (a.robot is None):
         raise ValueError("--joint-states needs --robot, and --robot needs --joint-states")
     if getattr(a, "rerun", None) is not None:  # before any work: the file and the package
         if not a.rerun.endswith(".rrd"):
             raise ValueError(f"--rerun {a.rerun!r}: a Rerun recording's file ends in .rrd")
-        if importlib.util.find_spec("rerun") is None:
+        if not _installed("rerun"):
             raise ValueError("--rerun needs rerun-sdk: pip install 'visjax[viz]'")
     if getattr(a, "camera_from_body", None) is not None:
         io.pose_from_text(a.camera_from_body)  # seven numbers, or one line saying so
