@@ -386,7 +386,8 @@ def build_parser() -> argparse.ArgumentParser:
     arg(tb, "--no-video", help="no MP4 of the rendered frames", action="store_false", dest="video")
     no_studies = "skip the camera matrix (Tables 5-1/5-2), the v_py sensitivity, the error budget"
     arg(tb, "--no-studies", help=no_studies, action="store_false", dest="studies")
-    common(tb, "tables, estimates, figures and videos", False, "the texture's seed (0)")
+    seed = "the texture's and the image noise's seed (0)"
+    common(tb, "tables, estimates, figures and videos", False, seed)
 
     r = sub.add_parser("reproduce", help="every paper's main experiment and a summary")
     arg(r, "--quick", help=report.quick_help(), action="store_true")

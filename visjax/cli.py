@@ -27,10 +27,10 @@ _VERBS = {"run": "run", "compare": "compare", "sweep": "sweep", "tune": "sweep",
 
 
 def _installed(module: str) -> bool:
-    """Whether `module` can be imported (its parent package too), without importing it."""
+    """Whether `module` can be found (importing its parent package, not `module` itself)."""
     try:
         return importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:
+    except (ImportError, ValueError):  # a parent missing or broken, or without a spec
         return False
 
 

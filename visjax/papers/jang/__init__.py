@@ -149,7 +149,7 @@ TABLE_5_2 = {"toolbox": (0.0172, 0.0248, 0.0548), "least_squares": (0.0172, 0.01
 
 BUDGET_SETS = ("I.1", "II.1")
 """The sets whose error budget `visjax testbed` reports (`testbed_error_budget`): the
-first static and the first moving set (22 runs of the twin: about 10 minutes on 2 cores
+first static and the first moving set (22 runs of the twin: about 8 minutes on 2 cores
 for 30 s each)."""
 
 VPY_AMPLITUDES = (0.0, 0.05, 0.2, 0.5, 1.0, 2.0)

@@ -91,7 +91,7 @@ class TestbedRun:
       `not_run` (infeasible), `marker_never_found`, `marker_found_late` (first found in
       the scored second half: the observer starts at the first frame the marker is found
       in, the estimates are NaN before it); `frames` (F, H, W) uint8 when kept, else
-      `None`.
+      `None`; `Kc_true` (3, 3) and `dist` (or `None`) the camera that rendered them.
     """
 
     set_name: str
@@ -117,6 +117,8 @@ class TestbedRun:
     tracking_rms_px: float
     result: str
     frames: np.ndarray | None
+    Kc_true: np.ndarray | None = None
+    dist: np.ndarray | None = None
 
 
 def _testbed_motion(s: ThesisSet, units: str, ts, vp_amplitude):
@@ -222,8 +224,9 @@ def testbed(
       projection the observer needs; `tracking_rms_px` is measured against the lens'
       image of the centre, so that it is the tracker's error alone.
     - `Kc_true` against `Kc_observer`: the camera's calibration error.
-    - `time_offset_s`: how much later than its frame the camera velocity was measured
-      (the encoders' twist at the frame's time minus this offset; default
+    - `time_offset_s`: how much earlier than its frame the camera velocity paired with it
+      was measured (the encoders' twist at the frame's time minus this offset, rounded to
+      a whole sample of `rate_hz`: 1/60 s is 17 ms at 1 kHz; default
       `TESTBED["velocity_delay_s"]`, 0).
     - `image_noise`: the standard deviation of additive Gaussian noise on each rendered
       frame (grey levels of 255; drawn from `seed`); `blur_px`: a Gaussian blur of that
@@ -251,6 +254,11 @@ def testbed(
                         ("blur_px", blur_px)):  # fmt: skip
         if not (np.isscalar(value) and np.isfinite(value) and value >= 0):
             raise ValueError(f"`{name}` must be a finite number >= 0; got {value!r}.")
+    if 0 < offset < 0.5 / rate_hz:
+        raise ValueError(
+            f"`time_offset_s` = {offset!r} rounds to no sample at {rate_hz} Hz: give 0 or at "
+            f"least {0.5 / rate_hz:g} s."
+        )
     if dist is not None:
         dist = np.asarray(dist, float)
         if dist.shape not in {(k,) for k in DISTORTION_LENGTHS} or not np.isfinite(dist).all():
@@ -483,6 +491,8 @@ def testbed(
         tracking_rms_px=tracking_rms,
         result=result,
         frames=frames,
+        Kc_true=Kt,
+        dist=dist,
     )
 
 
@@ -547,13 +557,15 @@ def testbed_record(run: TestbedRun) -> dict:
 
 def testbed_video(run: TestbedRun, path, fps: float = 30.0) -> None:
     """The rendered frames of a set with the tracked point (green circle) and the estimate
-    projected through the true camera (red cross) drawn on them, as an MP4."""
+    projected through the true camera and lens (red cross) drawn on them, as an MP4."""
 
-    K = np.asarray(KC_REFINED, float)
+    K = np.asarray(KC_REFINED if run.Kc_true is None else run.Kc_true, float)
     est = np.asarray(run.estimate)[np.minimum(run.frame_index, run.estimate.shape[0] - 1)]
     in_front = np.all(np.isfinite(est), axis=-1) & (est[:, 2] > 0)
     z = np.where(in_front, est[:, 2], 1.0)
     projected = (est[:, :2] / z[:, None]) @ K[:2, :2].T + K[:2, 2]
+    if run.dist is not None:
+        projected = np.asarray(distort_pixels(projected, K, run.dist))
     projected = np.where(in_front[:, None], projected, np.nan)
     captions = [f"{run.set_name}  t = {t:5.2f} s" for t in np.asarray(run.frame_ts)]
     write_video(path, annotate_frames(run.frames, run.pixels, projected, captions), fps)
@@ -582,8 +594,9 @@ PUMA560_COUNTS_PER_DEGREE = (173.92, 239.59, 149.18, 211.21, 199.79, 106.51)
 560's servo boards directly reported them (S. Graves, "Puma 560 encoders->degrees",
 comp.robotics, 4 October 1990; joint 6 with the board's divide-by-two bit). Joints 1, 3,
 4 and 5 are 1,000 counts per motor revolution times the gear ratios of Armstrong, Khatib
-and Burdick's PUMA 560 model (62.6111, 53.7063, 76.0364, 71.923). Not from the thesis,
-which states no resolution."""
+and Burdick, *The Explicit Dynamic Model and Inertial Parameters of the PUMA 560 Arm*
+(1986): 62.6111, 53.7063, 76.0364, 71.923. Not from the thesis, which states no
+resolution."""
 
 
 @dataclass(frozen=True)
@@ -630,7 +643,7 @@ ERROR_SOURCES = {
         "time_offset",
         {"time_offset_s": 1.0 / 60.0},
         "the velocity paired with a frame is 16.7 ms older than the frame (the mean age of "
-        "the latest of a 30 Hz stream not synchronised with the camera)",
+        "the latest of a 30 Hz stream not synchronised with the camera; 17 ms at 1 kHz)",
         "assumption",
         "'the camera velocities computed on the PUMA-workstation are transmitted to the "
         "main-workstation via serial communication at 30 Hz' (section 5.1); no "
@@ -708,7 +721,8 @@ def testbed_error_budget(
             {
                 "set": set_name, "sources": source, "reading": reading, "axis": axis,
                 "rms_m": float(rms[i]), "thesis_rms_m": float(SETS[set_name].thesis_rms[i]),
-                "tracking_rms_px": float(r.tracking_rms_px), "result": r.result,
+                "tracking_rms_px": float(r.tracking_rms_px) if r.feasible else np.nan,
+                "result": r.result,
             }
             for i, axis in enumerate("xyz")
         ]  # fmt: skip
